@@ -1,0 +1,120 @@
+"""Pick the Dr.Jit / Mitsuba variant, once, for the whole process.
+
+CUDA when a GPU is present, else LLVM with a libLLVM that works. libLLVM 15 and 16
+abort Dr.Jit 1.5 at the first kernel (``LLVM ERROR: Cannot select ... fminimum``): a
+process abort, not an exception. So the library is chosen *before* Dr.Jit loads one:
+
+1. a user's own ``DRJIT_LIBLLVM_PATH`` wins;
+2. else the libLLVM shipped by the ``karellen-llvm-core`` wheel (a dependency);
+3. else whatever the system has, checked by version before any kernel runs.
+
+Every module that touches Mitsuba calls :func:`use` instead of ``mi.set_variant``.
+``TOTEMS_VARIANT`` forces a variant; ``TOTEMS_THREADS`` caps Dr.Jit's worker threads.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import sys
+
+KNOWN_BAD_LLVM = (15, 16)
+
+
+class BackendError(RuntimeError):
+    """No working Dr.Jit backend on this machine."""
+
+
+_variant: str | None = None
+
+
+def _wheel_libllvm() -> str | None:
+    """Path of the libLLVM shipped by ``karellen-llvm-core``, if installed."""
+    try:
+        from importlib import metadata
+        dist = metadata.distribution("karellen-llvm-core")
+        files = [f for f in (dist.files or []) if "libLLVM" in f.name]
+        paths = sorted((str(dist.locate_file(f)) for f in files), key=len, reverse=True)
+        for p in paths:
+            if os.path.isfile(p):
+                return os.path.realpath(p)
+    except Exception:  # not installed, or metadata unreadable
+        pass
+    for p in sorted(glob.glob(os.path.join(sys.prefix, "lib", "libLLVM*.so*"))):
+        return os.path.realpath(p)
+    return None
+
+
+def _has_cuda() -> bool:
+    """True when an NVIDIA driver is visible (checked without initialising Dr.Jit)."""
+    if os.environ.get("TOTEMS_NO_CUDA"):
+        return False
+    import ctypes
+    try:
+        ctypes.CDLL("libcuda.so.1")
+    except OSError:
+        return False
+    return True
+
+
+def use(variant: str | None = None) -> str:
+    """Set and return the Mitsuba variant (``cuda_ad_rgb`` or ``llvm_ad_rgb``).
+
+    Idempotent: the first call chooses, later calls return the same variant. An
+    explicit ``variant`` (or the ``TOTEMS_VARIANT`` environment variable) forces one.
+
+    Raises
+    ------
+    BackendError
+        When only a libLLVM known to crash Dr.Jit is available, with what to install.
+    """
+    global _variant
+    if _variant is not None:
+        return _variant
+    variant = variant or os.environ.get("TOTEMS_VARIANT")
+    if variant is None:
+        variant = "cuda_ad_rgb" if _has_cuda() else "llvm_ad_rgb"
+    if variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        lib = _wheel_libllvm()
+        if lib:
+            os.environ["DRJIT_LIBLLVM_PATH"] = lib
+
+    import drjit as dr
+    import mitsuba as mi
+
+    try:
+        mi.set_variant(variant)
+    except Exception as exc:
+        if variant.startswith("cuda"):
+            return use("llvm_ad_rgb")
+        raise BackendError(f"cannot start Mitsuba variant {variant}: {exc}") from None
+    if variant.startswith("llvm"):
+        try:
+            version = tuple(dr.detail.llvm_version())
+        except Exception:
+            version = ()
+        if not version:
+            raise BackendError(
+                "Dr.Jit found no libLLVM: `pip install karellen-llvm-core` "
+                "or set DRJIT_LIBLLVM_PATH to a libLLVM 17 or newer")
+        if version[0] in KNOWN_BAD_LLVM or version[0] < 11:
+            raise BackendError(
+                f"libLLVM {'.'.join(map(str, version))} crashes Dr.Jit; "
+                "`pip install karellen-llvm-core` or set DRJIT_LIBLLVM_PATH "
+                "to a libLLVM 17 or newer")
+    threads = os.environ.get("TOTEMS_THREADS")
+    if threads:
+        dr.set_thread_count(int(threads))
+    _variant = variant
+    return variant
+
+
+def describe() -> dict:
+    """Versions of the backend pieces, for reports (``fit.json``, ``report.json``)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    info = {"variant": use(), "mitsuba": mi.__version__, "drjit": dr.__version__}
+    if info["variant"].startswith("llvm"):
+        info["llvm"] = ".".join(map(str, dr.detail.llvm_version()))
+    return info

@@ -1,0 +1,67 @@
+"""Pinhole camera in the OpenCV frame (+x right, +y down, +z forward; metres).
+
+Pixel (u, v) (column, row, from 0) sits at image coordinate (u, v): the pixel centre,
+as in OpenCV and the NeRF path. Mitsuba's film puts pixel u's centre at u + 0.5; the
+sensor built here compensates with the principal-point offset so that a 3D point
+lands on the pixel that ``K`` predicts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def intrinsics(width: int, height: int, fov_x_deg: float) -> np.ndarray:
+    """3x3 ``K`` with square pixels, principal point at the image centre.
+
+    The centre is ((W - 1) / 2, (H - 1) / 2) in the pixel-centre convention.
+    """
+    fx = 0.5 * width / np.tan(0.5 * np.radians(fov_x_deg))
+    return np.array([[fx, 0.0, (width - 1) / 2.0],
+                     [0.0, fx, (height - 1) / 2.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def project(K: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Project camera-frame points ``X`` (..., 3) in metres to pixels (..., 2)."""
+    X = np.asarray(X, dtype=np.float64)
+    x = X @ np.asarray(K, dtype=np.float64).T
+    return x[..., :2] / x[..., 2:3]
+
+
+def pixel_rays(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Unit directions (..., 3), camera frame, of the rays through pixels (u, v)."""
+    Kinv = np.linalg.inv(np.asarray(K, dtype=np.float64))
+    uv1 = np.stack([np.asarray(u, float), np.asarray(v, float), np.ones(np.shape(u))], -1)
+    d = uv1 @ Kinv.T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def mitsuba_sensor(K: np.ndarray, width: int, height: int, spp: int = 16,
+                   filter_type: str = "box") -> dict:
+    """A Mitsuba ``perspective`` sensor dict that images like ``K`` (OpenCV frame).
+
+    Assumes square pixels (fx == fy). Mitsuba looks down +z with up -y, which makes
+    its world frame the OpenCV camera frame.
+    """
+    import mitsuba as mi
+
+    K = np.asarray(K, dtype=np.float64)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if abs(fx - fy) > 1e-6 * fx:
+        raise ValueError("mitsuba_sensor needs square pixels (fx == fy)")
+    fov = np.degrees(2.0 * np.arctan(width / (2.0 * fx)))
+    return {
+        "type": "perspective",
+        "fov": float(fov),
+        "fov_axis": "x",
+        "principal_point_offset_x": float(-(cx + 0.5 - width / 2.0) / width),
+        "principal_point_offset_y": float(-(cy + 0.5 - height / 2.0) / height),
+        "near_clip": 0.01,
+        "far_clip": 1000.0,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=[0, 0, 1],
+                                                   up=[0, -1, 0]),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {"type": "hdrfilm", "width": int(width), "height": int(height),
+                 "rfilter": {"type": filter_type}, "pixel_format": "rgb"},
+    }

@@ -1,0 +1,1 @@
+"""Synthetic totem-protected scenes (Mitsuba 3), the scene folder, manipulations."""

@@ -1,0 +1,1 @@
+"""Compare a re-rendered camera view with the photo: region, heatmaps, verdict."""
