@@ -1,0 +1,242 @@
+"""The ``totems`` command: parse, call the library, map errors to exit codes.
+
+Exit codes (as ``cmp``/``diff``): 0 ran (and for verify/check: consistent), 1 verify/check
+found the photo inconsistent with its totems, 2 bad input or usage (one line on stderr).
+Everything else is a bug. Verbs and outputs: ``shared/CONTRACT.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+EXIT_OK, EXIT_INCONSISTENT, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors in one line, exit 2."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 640x480, got {text!r}")
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 px, got {text}")
+    return w, h
+
+
+def _region(text: str) -> tuple[int, int, int, int]:
+    try:
+        x, y, w, h = (int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"region must be x,y,w,h in pixels, got {text!r}")
+    return x, y, w, h
+
+
+def _positive(kind):
+    def parse(text):
+        v = kind(text)
+        if v <= 0:
+            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+        return v
+    return parse
+
+
+# --------------------------------------------------------------------------- verbs
+
+def _progress(args) -> bool:
+    return not args.quiet and sys.stderr.isatty()
+
+
+def cmd_scene_make(args) -> dict:
+    from scenes.make import make_scene
+
+    t0 = time.perf_counter()
+    out = make_scene(args.out, preset=args.preset, seed=args.seed, size=args.size,
+                     n_totems=args.totems, spp=args.spp, progress=_progress(args))
+    return {"scene": str(out), "preset": args.preset, "seed": args.seed,
+            "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def cmd_tamper(args) -> dict:
+    from scenes.folder import read_mask
+    from scenes.tamper import tamper
+
+    region = args.region
+    if args.region_mask:
+        region = read_mask(args.region_mask, what="region mask")
+    out = tamper(args.scene, args.out, kind=args.kind, seed=args.seed, region=region)
+    return {"scene": str(out), "kind": args.kind, "seed": args.seed}
+
+
+def _out_dir(args) -> Path:
+    return Path(args.out) if args.out else Path(args.scene) / "totems-out"
+
+
+def _fit(args, scene):
+    from inverse.fit import fit_scene, write_fit
+
+    result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
+                       progress=_progress(args))
+    fit_dir = _out_dir(args) / "fit"
+    write_fit(result, fit_dir)
+    return result, fit_dir
+
+
+def cmd_fit(args) -> dict:
+    from scenes.folder import read_scene
+
+    scene = read_scene(args.scene)
+    result, fit_dir = _fit(args, scene)
+    return {"fit": str(fit_dir), "centers": result.centers.tolist(),
+            "initial": result.initial.tolist(), "timing_s": result.timings}
+
+
+def _verify(args, scene, fit, fit_seconds=None) -> dict:
+    from scenes.folder import read_truth
+    from verify.report import verify_scene, write_verify
+
+    report = verify_scene(scene, fit, truth=read_truth(args.scene))
+    if fit_seconds is not None:
+        report.timing_s["fit"] = round(fit_seconds, 2)
+    out = _out_dir(args) / "verify"
+    write_verify(report, out)
+    summary = report.to_json()
+    summary["verify"] = str(out)
+    return summary
+
+
+def cmd_verify(args) -> dict:
+    from inverse.fit import load_fit, scene_fingerprint
+    from scenes.errors import BadInput
+    from scenes.folder import read_scene
+
+    scene = read_scene(args.scene)
+    fit_dir = Path(args.fit) if args.fit else _out_dir(args) / "fit"
+    if args.fit or (fit_dir / "fit.json").is_file():
+        fit = load_fit(fit_dir)
+        if fit.scene_fingerprint != scene_fingerprint(scene):
+            raise BadInput(f"the fit in {fit_dir} was made from another scene or photo; "
+                           f"run `totems fit {args.scene}` or drop --fit")
+        return _verify(args, scene, fit)
+    t0 = time.perf_counter()
+    fit, _ = _fit(args, scene)
+    return _verify(args, scene, fit, time.perf_counter() - t0)
+
+
+def cmd_check(args) -> dict:
+    from scenes.folder import read_scene
+
+    scene = read_scene(args.scene)
+    t0 = time.perf_counter()
+    fit, _ = _fit(args, scene)
+    return _verify(args, scene, fit, time.perf_counter() - t0)
+
+
+def _print_summary(verb: str, summary: dict) -> None:
+    if "verdict" in summary:
+        m = summary.get("metrics", {})
+        extras = ", ".join(f"{k} {v:.3f}" for k, v in m.items() if v is not None)
+        print(f"{summary['verdict']}: score {summary['score']:.3f} "
+              f"(threshold {summary['threshold']:.3f}); "
+              f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
+              + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
+    else:
+        where = summary.get("scene") or summary.get("fit") or ""
+        print(f"{verb}: wrote {where}")
+
+
+# --------------------------------------------------------------------------- parser
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="totems", description="Physics-based verifier for totem-protected "
+                "photographs: fit the scene seen through glass totems, re-render the "
+                "camera view, find where the photo disagrees.")
+    sub = p.add_subparsers(dest="verb", required=True, parser_class=_Parser)
+
+    def verb(name, func, help_, parent=sub):
+        v = parent.add_parser(name, help=help_, description=help_)
+        v.set_defaults(func=func)
+        v.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+        v.add_argument("--quiet", action="store_true", help="no progress, no summary line")
+        return v
+
+    scene = sub.add_parser("scene", help="synthetic totem-protected scenes")
+    scene_sub = scene.add_subparsers(dest="scene_verb", required=True, parser_class=_Parser)
+    v = verb("make", cmd_scene_make, "render a synthetic totem-protected scene folder",
+             scene_sub)
+    v.add_argument("out", help="new scene folder")
+    v.add_argument("--preset", choices=("box", "envmap"), default="box")
+    v.add_argument("--seed", type=int, default=1)
+    v.add_argument("--size", type=_size, default=(640, 480), help="WxH (default 640x480)")
+    v.add_argument("--totems", type=_positive(int), default=4, help="number of totems")
+    v.add_argument("--spp", type=_positive(int), default=None,
+                   help="samples per pixel (default: the preset's)")
+
+    v = verb("tamper", cmd_tamper, "write a manipulated copy of a scene folder")
+    v.add_argument("scene")
+    v.add_argument("out")
+    v.add_argument("--kind", required=True,
+                   choices=("color", "splice", "inpaint", "shift", "remove", "insert"))
+    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--region", type=_region, default=None,
+                   help="x,y,w,h region to edit (photos without truth/)")
+    v.add_argument("--region-mask", default=None, help="PNG mask of the region to edit")
+
+    v = verb("fit", cmd_fit, "pose initialisation + joint fit of the radiance grid and "
+             "the totem centres")
+    v.add_argument("scene")
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+    v.add_argument("--fixed-pose", action="store_true",
+                   help="keep the totem centres at their initialisation")
+
+    v = verb("verify", cmd_verify, "protected region, heatmaps, verdict, metrics")
+    v.add_argument("scene")
+    v.add_argument("--fit", default=None, help="fit folder (default: OUT/fit, else fit now)")
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+
+    v = verb("check", cmd_check, "fit, then verify: the one-shot fit-and-compare")
+    v.add_argument("scene")
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+    v.add_argument("--fixed-pose", action="store_true",
+                   help="keep the totem centres at their initialisation")
+    return p
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``totems`` console script; returns the exit code."""
+    from inverse.backend import BackendError
+    from scenes.errors import BadInput
+
+    args = build_parser().parse_args(argv)
+    try:
+        summary = args.func(args)
+    except (BadInput, BackendError) as exc:
+        print(f"totems: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        print(f"totems: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "),
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("totems: interrupted", file=sys.stderr)
+        return 130
+    if args.json:
+        print(json.dumps(summary, default=str))
+    elif not args.quiet:
+        _print_summary(args.verb, summary)
+    if summary.get("verdict") == "inconsistent":
+        return EXIT_INCONSISTENT
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())
