@@ -1,0 +1,266 @@
+"""Ray optics of a glass sphere (a totem), in Dr.Jit, differentiable in its centre.
+
+A camera ray ``o + t d`` enters the totem (centre ``P``, radius ``R``, index of
+refraction ``eta`` relative to the air around it) at ``D``, travels inside along
+``d_mid`` to ``E`` and leaves along ``d_out``. The scene ray a totem pixel sees is
+``o_out + t d_out`` with ``o_out = E`` (paper, Sec. 4.1 and supp. A.1, Eqs. 1-6).
+
+Conventions (the same everywhere in this module):
+
+- Frame: the OpenCV camera frame (+x right, +y down, +z forward), metres.
+- Directions are *propagation* directions (from the camera towards the scene), unit.
+- Normals ``N = (X - P) / R`` point *out of* the sphere and are recomputed from the hit
+  point and the centre, so that gradients with respect to ``P`` flow through them.
+- ``eta = n_glass / n_air`` (> 1 for glass): Mitsuba's ``mi.fresnel`` convention,
+  interior over exterior IoR, with the normal pointing to the exterior.
+- All arrays are Dr.Jit arrays of the active variant (call
+  ``inverse.backend.use()`` first), one lane per ray: ``mi.Point3f`` / ``mi.Vector3f``
+  for points / directions, ``mi.Float`` (or Python floats, broadcast) for ``R``, ``eta``.
+  ``P`` is the centre of the totem each ray is tested against (gathered per ray).
+
+Reflections inside the totem are ignored (the paper does the same); ``T`` is the
+fraction of unpolarised light that crosses both surfaces.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from inverse import backend
+
+backend.use()
+
+import drjit as dr  # noqa: E402  (after the variant is chosen)
+import mitsuba as mi  # noqa: E402
+
+#: Rays meeting the surface more obliquely than this (cosine of the incidence
+#: angle) are flagged invalid: their exit direction is too sensitive to the pose.
+COS_MIN = 0.2
+
+
+def _vec(x, cls=mi.Vector3f):
+    """A Dr.Jit 3-vector from a Dr.Jit array, or a numpy array of shape (3,) or (n, 3)."""
+    if isinstance(x, dr.ArrayBase):
+        return cls(x)
+    a = np.asarray(x, dtype=np.float32)
+    if a.ndim == 2 and a.shape[1] == 3:
+        return cls(a[:, 0], a[:, 1], a[:, 2])
+    if a.shape == (3,):
+        return cls(float(a[0]), float(a[1]), float(a[2]))
+    raise ValueError(f"expected a 3-vector or an (n, 3) array, got shape {a.shape}")
+
+
+def intersect(o, d, P, R):
+    """Both intersections of the rays ``o + t d`` with the sphere ``|X - P| = R``.
+
+    Solves ``a t^2 + 2 b t + c = 0`` with ``a = |d|^2``, ``b = <o - P, d>``,
+    ``c = |o - P|^2 - R^2`` (supp. A.1, ``intersect``) in a form that keeps float32
+    accuracy for far spheres and for origins on the sphere:
+    the discriminant is ``a (R^2 - |l|^2)`` with ``l`` the part of ``o - P``
+    orthogonal to ``d`` (no cancellation of two large terms), and the roots are
+    ``q / a`` and ``c / q`` with ``q = -(b + sign(b) sqrt(disc))``.
+
+    Parameters
+    ----------
+    o : mi.Point3f
+        Ray origins, metres.
+    d : mi.Vector3f
+        Ray directions (need not be unit; ``t`` is in units of ``|d|``).
+    P : mi.Point3f
+        Sphere centres, metres, one per ray (or one for all).
+    R : mi.Float or float
+        Sphere radii, metres.
+
+    Returns
+    -------
+    t_near, t_far : mi.Float
+        Ray parameters of the two intersections, ``t_near <= t_far`` (garbage where
+        ``hit`` is False).
+    hit : mi.Bool
+        The line meets the sphere (discriminant > 0) and ``t_far > 0``.
+    """
+    o, d, P = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f)
+    f = mi.Vector3f(o - P)
+    a = dr.squared_norm(d)
+    b = dr.dot(f, d)
+    c = dr.squared_norm(f) - dr.square(R)
+    l = f - (b / a) * d                      # component of o - P orthogonal to d
+    disc = a * (dr.square(R) - dr.squared_norm(l))
+    hit = disc > 0
+    # Keep the square root's derivative finite on lanes that miss.
+    sqrt_disc = dr.sqrt(dr.select(hit, disc, a * dr.square(R)))
+    q = -(b + dr.select(b >= 0, sqrt_disc, -sqrt_disc))
+    q = dr.select(q == 0, 1e-30, q)         # b = 0 and tangent: both roots are 0
+    t0, t1 = c / q, q / a
+    t_near, t_far = dr.minimum(t0, t1), dr.maximum(t0, t1)
+    return t_near, t_far, hit & (t_far > 0)
+
+
+def refract(d, N, eta):
+    """Refract propagation directions ``d`` at a surface with outward normal ``N``.
+
+    Works from either side: when ``d`` travels against ``N`` the ray enters the
+    denser medium (``n_out -> n_in``), when along ``N`` it leaves it. Uses Mitsuba's
+    ``mi.fresnel`` (unpolarised Fresnel, ``eta = n_in / n_out``) and the vector form
+    of ``mi.refract`` (Snell: ``n1 sin(theta1) = n2 sin(theta2)``, ``d``, ``N``,
+    ``d_t`` coplanar).
+
+    Parameters
+    ----------
+    d : mi.Vector3f
+        Unit propagation directions.
+    N : mi.Vector3f
+        Unit outward normals.
+    eta : mi.Float or float
+        ``n_in / n_out`` (glass over air for a totem).
+
+    Returns
+    -------
+    d_t : mi.Vector3f
+        Unit refracted propagation directions (undefined where ``tir``).
+    F : mi.Float
+        Fresnel reflectance (unpolarised); ``1 - F`` is transmitted.
+    cos_theta_i : mi.Float
+        ``|cos|`` of the incidence angle (1 at normal incidence, 0 grazing).
+    tir : mi.Bool
+        Total internal reflection: no transmitted ray.
+    """
+    d, N = _vec(d), _vec(N)
+    wi = -d                                  # Mitsuba's wi points back to the source
+    cos_i = dr.dot(wi, N)                    # > 0 from outside, < 0 from inside
+    F, cos_t, _eta_it, eta_ti = mi.fresnel(cos_i, eta)
+    d_t = mi.refract(wi, mi.Normal3f(N), cos_t, eta_ti)
+    tir = F >= 1
+    return d_t, F, dr.abs(cos_i), tir
+
+
+def refract_in_out(d_in, D, P, R, eta):
+    """The two refractions through the sphere, from the entry point ``D`` on.
+
+    Eqs. 2-6 of the paper: ``N1 = (D - P) / R``, ``d_mid = refract(d_in, N1)``,
+    ``E`` = far intersection of ``D + t d_mid``, ``N2 = (E - P) / R``,
+    ``d_out = refract(d_mid, N2)``.
+
+    Parameters
+    ----------
+    d_in : mi.Vector3f
+        Unit propagation directions of the incoming rays.
+    D : mi.Point3f
+        Entry points on the sphere, metres.
+    P : mi.Point3f
+        Sphere centres, metres.
+    R : mi.Float or float
+        Radii, metres.
+    eta : mi.Float or float
+        ``n_glass / n_air``.
+
+    Returns
+    -------
+    d_mid : mi.Vector3f
+        Unit direction inside the sphere.
+    E : mi.Point3f
+        Exit point, metres.
+    d_out : mi.Vector3f
+        Unit exit direction.
+    T : mi.Float
+        Transmittance ``(1 - F1)(1 - F2)``, unpolarised.
+    cos_in, cos_out : mi.Float
+        Cosines of the incidence angles at ``D`` (outside) and at ``E`` (inside).
+    tir : mi.Bool
+        Total internal reflection at either surface.
+    """
+    d_in, D, P = _vec(d_in), _vec(D, mi.Point3f), _vec(P, mi.Point3f)
+    N1 = mi.Vector3f(D - P) / R
+    d_mid, F1, cos_in, tir1 = refract(d_in, N1, eta)
+    d_mid = dr.normalize(d_mid)
+    # D is on the sphere, so the exit is the far root (the near one is ~0).
+    _, t_exit, _ = intersect(D, d_mid, P, R)
+    E = D + t_exit * d_mid
+    N2 = mi.Vector3f(E - P) / R
+    d_out, F2, cos_out, tir2 = refract(d_mid, N2, eta)
+    d_out = dr.normalize(d_out)
+    T = (1 - F1) * (1 - F2)
+    return d_mid, mi.Point3f(E), d_out, T, cos_in, cos_out, tir1 | tir2
+
+
+class TotemPath(NamedTuple):
+    """Everything along a camera ray's path through a totem (camera frame, metres)."""
+    D: mi.Point3f        # entry point
+    d_mid: mi.Vector3f   # direction inside
+    E: mi.Point3f        # exit point = o_out
+    d_out: mi.Vector3f   # exit direction
+    T: mi.Float          # Fresnel transmittance (1 - F1)(1 - F2), unpolarised
+    cos_in: mi.Float     # cosine of the incidence angle at D
+    t_in: mi.Float       # camera-ray parameter of D
+    valid: mi.Bool       # hit, no TIR, not grazing
+
+
+def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
+    """Trace camera rays through totems; see :func:`totem_rays` (this returns more).
+
+    On lanes where the ray misses, the computation runs on the ray through the
+    centre instead (finite values and derivatives), and the outputs are the input
+    ray: ``D = E = o``, ``d_mid = d_out = d``, ``T = 0``.
+    """
+    o, d, P = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f)
+    t_near, _, hit = intersect(o, d, P, R)
+    hit &= t_near > 0                        # camera outside the totem, totem ahead
+    # Misses: trace the central ray instead, so no NaN reaches any gradient.
+    to_c = dr.normalize(mi.Vector3f(P - o))
+    d_safe = dr.select(hit, d, to_c)
+    t_near_s, _, _ = intersect(o, d_safe, P, R)
+    D = o + t_near_s * d_safe
+    d_mid, E, d_out, T, cos_in, _, tir = refract_in_out(d_safe, D, P, R, eta)
+    valid = hit & ~tir & (cos_in >= cos_min)
+    return TotemPath(
+        D=mi.Point3f(dr.select(hit, D, o)),
+        d_mid=mi.Vector3f(dr.select(hit, d_mid, d)),
+        E=mi.Point3f(dr.select(hit, E, o)),
+        d_out=mi.Vector3f(dr.select(hit, d_out, d)),
+        T=dr.select(valid, T, 0.0),
+        cos_in=dr.select(hit, cos_in, 0.0),
+        t_in=dr.select(hit, t_near, 0.0),
+        valid=valid,
+    )
+
+
+def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
+    """Scene rays seen through totems by camera rays (paper Sec. 4.1, Eqs. 1-6).
+
+    Parameters
+    ----------
+    o : mi.Point3f
+        Camera-ray origins, metres, camera frame (usually 0).
+    d : mi.Vector3f
+        Unit camera-ray directions, camera frame (e.g. ``camera.pixel_rays``).
+    P : mi.Point3f
+        Centre of the totem each ray is traced through, metres, camera frame
+        (gather it per ray, e.g. ``dr.gather(mi.Point3f, centers, totem_index)``).
+    R : mi.Float or float
+        Totem radius, metres.
+    eta : mi.Float or float
+        Totem IoR relative to air, ``n_glass / n_air`` (e.g. 1.52).
+    cos_min : float
+        Rays whose incidence cosine at entry is below this are flagged invalid
+        (grazing). For a sphere the exit angle equals the entry angle, so this
+        bounds both surfaces; TIR cannot occur for ``eta > 1`` but is flagged anyway.
+
+    Returns
+    -------
+    o_out : mi.Point3f
+        Exit point ``E`` on the sphere, metres (``o`` where the ray misses).
+    d_out : mi.Vector3f
+        Unit exit direction (``d`` where the ray misses).
+    T : mi.Float
+        Fresnel transmittance ``(1 - F1)(1 - F2)`` of unpolarised light; 0 where
+        invalid.
+    valid : mi.Bool
+        The ray hits the sphere in front of the camera, no TIR, not grazing.
+
+    All outputs are differentiable with respect to ``P`` (and ``o``, ``d``): the
+    normals are recomputed from the hit points and the centre.
+    """
+    path = totem_path(o, d, P, R, eta, cos_min=cos_min)
+    return path.E, path.d_out, path.T, path.valid
