@@ -83,9 +83,18 @@ def _out_dir(args) -> Path:
 
 def _fit(args, scene):
     from inverse.fit import fit_scene, write_fit
+    from scenes.errors import BadInput
 
+    true_pose = None
+    if getattr(args, "oracle_pose", False):
+        from scenes.folder import read_truth
+
+        truth = read_truth(args.scene)
+        if truth is None:
+            raise BadInput("--oracle-pose needs truth/totem_pose.npy (synthetic scenes)")
+        true_pose = truth.totem_pose
     result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
-                       progress=_progress(args))
+                       true_pose=true_pose, progress=_progress(args))
     fit_dir = _out_dir(args) / "fit"
     write_fit(result, fit_dir)
     return result, fit_dir
@@ -141,6 +150,15 @@ def cmd_check(args) -> dict:
     return _verify(args, scene, fit, time.perf_counter() - t0)
 
 
+def cmd_bench(args) -> dict:
+    from verify.bench import run_bench
+
+    bench = run_bench(args.dirs, args.out, jobs=args.jobs, table1=not args.no_table1,
+                      progress=_progress(args))
+    return {"bench": str(args.out), "scenes": bench["scenes"],
+            "failed": len(bench["summary"]["failed"]), "wall_s": bench["wall_s"]}
+
+
 def _print_summary(verb: str, summary: dict) -> None:
     if "verdict" in summary:
         m = summary.get("metrics", {})
@@ -150,7 +168,7 @@ def _print_summary(verb: str, summary: dict) -> None:
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
     else:
-        where = summary.get("scene") or summary.get("fit") or ""
+        where = summary.get("scene") or summary.get("fit") or summary.get("bench") or ""
         print(f"{verb}: wrote {where}")
 
 
@@ -197,6 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
     v.add_argument("--fixed-pose", action="store_true",
                    help="keep the totem centres at their initialisation")
+    v.add_argument("--oracle-pose", action="store_true",
+                   help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
 
     v = verb("verify", cmd_verify, "protected region, heatmaps, verdict, metrics")
     v.add_argument("scene")
@@ -208,6 +228,15 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
     v.add_argument("--fixed-pose", action="store_true",
                    help="keep the totem centres at their initialisation")
+    v.add_argument("--oracle-pose", action="store_true",
+                   help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
+
+    v = verb("bench", cmd_bench, "run check over many scene folders and write the tables")
+    v.add_argument("dirs", nargs="+", help="folders holding scene folders")
+    v.add_argument("--out", default="bench-out", help="output folder (default bench-out)")
+    v.add_argument("--jobs", type=_positive(int), default=1, help="scenes run at once")
+    v.add_argument("--no-table1", action="store_true",
+                   help="skip the initial-pose and oracle-pose fits of untouched scenes")
     return p
 
 

@@ -1,0 +1,65 @@
+"""Build the standard benchmark set: both presets, several seeds, every manipulation.
+
+    python benchmarks/make_set.py OUT [--small] [--seeds N] [--totems-study]
+
+Layout: OUT/<preset>-<seed>/ (untouched) and OUT/<preset>-<seed>-<kind>/ (manipulated).
+--small: 2 seeds at 320x240, for a quick run. --totems-study: also box scenes with 2 and
+6 totems (the supplementary's study of the number of totems). Existing folders are kept,
+so an interrupted build resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from scenes.make import make_scene
+from scenes.tamper import KINDS, tamper
+
+
+def build(out: Path, *, presets, seeds, size, kinds, totem_counts, spp=None) -> list[Path]:
+    made = []
+    for preset in presets:
+        for seed in seeds:
+            for n in totem_counts:
+                name = f"{preset}-{seed}" + ("" if n == 4 else f"-{n}totems")
+                base = out / name
+                if not base.exists():
+                    t0 = time.perf_counter()
+                    make_scene(base, preset=preset, seed=seed, size=size, n_totems=n,
+                               spp=spp)
+                    print(f"made {name} in {time.perf_counter() - t0:.0f} s", flush=True)
+                made.append(base)
+                if n != 4:
+                    continue
+                for kind in kinds:
+                    dst = out / f"{name}-{kind}"
+                    if not dst.exists():
+                        tamper(base, dst, kind=kind, seed=seed)
+                        print(f"tampered {dst.name}", flush=True)
+                    made.append(dst)
+    return made
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("out", type=Path)
+    p.add_argument("--small", action="store_true", help="2 seeds at 320x240")
+    p.add_argument("--seeds", type=int, default=None, help="seeds per preset (default 5)")
+    p.add_argument("--totems-study", action="store_true")
+    p.add_argument("--presets", default="box,envmap")
+    p.add_argument("--kinds", default=",".join(KINDS))
+    args = p.parse_args(argv)
+    seeds = range(1, 1 + (args.seeds or (2 if args.small else 5)))
+    size = (320, 240) if args.small else (640, 480)
+    counts = (2, 4, 6) if args.totems_study else (4,)
+    made = build(args.out, presets=args.presets.split(","), seeds=seeds, size=size,
+                 kinds=[k for k in args.kinds.split(",") if k], totem_counts=counts)
+    print(f"{len(made)} scene folders in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

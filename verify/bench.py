@@ -1,0 +1,308 @@
+"""``totems bench``: run check over many scene folders and write the paper's tables.
+
+Each scene runs in its own process (``totems check ... --json``), so a scene that fails,
+even by a crash of the backend, is recorded as failed and the others go on. Untouched
+synthetic scenes are also fitted with the initial pose kept fixed and with the true pose
+(oracle), which gives the three rows of the paper's Table 1.
+
+Outputs (``OUT/``): ``bench.json`` (every run), ``bench.csv`` (one row a run),
+``bench.md`` (the tables beside the paper's figures), ``plots/*.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from scenes import folder
+from scenes.errors import BadInput
+
+# The paper's figures (Tables 1 and 2 of the main text; supplementary for the totem study).
+PAPER_TABLE1 = {  # preset -> mode -> (recon L1, pose L1 in metres)
+    "box": {"initial": (0.057, 0.008), "joint": (0.054, 0.108), "oracle": (0.047, None)},
+    "envmap": {"initial": (0.173, 0.060), "joint": (0.103, 0.027), "oracle": (0.040, None)},
+}
+PAPER_TABLE2 = {  # kind -> (AP with L1, AP with LPIPS), joint fit
+    "color": (0.961, 0.946), "splice": (0.638, 0.739), "inpaint": (0.554, 0.666),
+}
+PAPER_TOTEMS = {2: 0.16, 4: 0.08, 6: 0.09}   # recon L1 against the number of totems
+MODES = {"joint": [], "initial": ["--fixed-pose"], "oracle": ["--oracle-pose"]}
+
+
+def find_scenes(roots) -> list[Path]:
+    """Scene folders (with image.png and totem_masks/) at or below ``roots``, sorted."""
+    found = set()
+    for root in map(Path, roots):
+        if not root.exists():
+            raise BadInput(f"no such folder: {root}")
+        for img in [root / "image.png", *root.rglob("image.png")]:
+            d = img.parent
+            if img.is_file() and (d / "totem_masks").is_dir() and "totems-out" not in d.parts:
+                found.add(d.resolve())
+    if not found:
+        raise BadInput(f"no scene folders (image.png + totem_masks/) under "
+                              f"{', '.join(map(str, roots))}")
+    return sorted(found)
+
+
+def describe_scene(scene: Path) -> dict:
+    """Preset, manipulation kind and number of totems of a scene folder, as recorded."""
+    info = {"scene": str(scene), "name": scene.name, "preset": "real", "kind": "none",
+            "n_totems": len(list((scene / "totem_masks").glob("*.png")))}
+    sj = scene / "truth" / "scene.json"
+    if sj.is_file():
+        info["preset"] = json.loads(sj.read_text()).get("preset", "synthetic")
+    tj = scene / "truth" / "tamper.json"
+    if tj.is_file():
+        info["kind"] = json.loads(tj.read_text()).get("kind", "unknown")
+    elif (scene / "manip_mask.png").is_file():
+        info["kind"] = "manipulated"
+    return info
+
+
+def modes_for(info: dict, table1: bool) -> list[str]:
+    """Joint fit always; initial and oracle too for untouched synthetic scenes."""
+    if table1 and info["kind"] == "none" and info["preset"] != "real":
+        return ["joint", "initial", "oracle"]
+    return ["joint"]
+
+
+def run_check(scene: Path, out: Path, mode: str, timeout: float) -> dict:
+    """Run ``totems check`` on one scene in a fresh process; never raises."""
+    cmd = [sys.executable, "-m", "verify.cli", "check", str(scene), "--out", str(out),
+           "--json", "--quiet", *MODES[mode]]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    except subprocess.TimeoutExpired:
+        return {"status": "failed", "error": f"timed out after {timeout:.0f} s"}
+    wall = time.perf_counter() - t0
+    if proc.returncode in (0, 1):
+        try:
+            summary = json.loads(proc.stdout.strip().splitlines()[-1])
+        except (ValueError, IndexError):
+            return {"status": "failed", "error": "check printed no JSON summary",
+                    "wall_s": wall}
+        return {"status": "ok", "wall_s": wall, **summary}
+    err = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
+    return {"status": "failed", "error": err, "exit_code": proc.returncode, "wall_s": wall}
+
+
+def run_bench(roots, out, *, jobs: int = 1, table1: bool = True, timeout: float = 3600,
+              progress: bool = False) -> dict:
+    """Run every scene under ``roots``; write bench.json/csv/md and plots in ``out``."""
+    out = Path(out)
+    scenes = [describe_scene(s) for s in find_scenes(roots)]
+    tasks = [(info, mode) for info in scenes for mode in modes_for(info, table1)]
+
+    def one(task):
+        info, mode = task
+        run_out = out / "runs" / f"{info['name']}-{mode}"
+        return {**info, "mode": mode, **run_check(Path(info["scene"]), run_out, mode,
+                                                   timeout)}
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        it = pool.map(one, tasks)
+        if progress:
+            from tqdm import tqdm
+            it = tqdm(it, total=len(tasks), desc="bench", unit="run")
+        runs = list(it)
+    bench = {"runs": runs, "summary": summarise(runs), "jobs": jobs,
+             "wall_s": round(time.perf_counter() - t0, 1), "scenes": len(scenes)}
+    write_outputs(bench, out)
+    return bench
+
+
+# --------------------------------------------------------------------------- tables
+
+def _mean(values):
+    v = [x for x in values if x is not None and np.isfinite(x)]
+    return float(np.mean(v)) if v else None
+
+
+def _metric(run, name):
+    return (run.get("metrics") or {}).get(name)
+
+
+def summarise(runs: list[dict]) -> dict:
+    """Table 1 (recon/pose per preset and mode), Table 2 (AP per kind), accuracy."""
+    ok = [r for r in runs if r["status"] == "ok"]
+    table1 = {}
+    for r in ok:
+        if r["kind"] != "none":
+            continue
+        table1.setdefault(r["preset"], {}).setdefault(r["mode"], []).append(r)
+    table1 = {p: {m: {"recon_L1": _mean(_metric(r, "recon_L1") for r in rs),
+                      "pose_L1": _mean(_metric(r, "pose_L1") for r in rs), "n": len(rs)}
+                  for m, rs in modes.items()} for p, modes in table1.items()}
+    table2 = {}
+    for r in ok:
+        if r["mode"] == "joint" and r["kind"] != "none":
+            table2.setdefault(r["kind"], []).append(r)
+    table2 = {k: {"ap_L1": _mean(_metric(r, "patch_ap_L1") for r in rs),
+                  "ap_SSIM": _mean(_metric(r, "patch_ap_SSIM") for r in rs), "n": len(rs)}
+              for k, rs in table2.items()}
+    joint = [r for r in ok if r["mode"] == "joint"]
+    untouched = [r for r in joint if r["kind"] == "none"]
+    manipulated = [r for r in joint if r["kind"] != "none"]
+    totems = {}
+    for r in joint:
+        if r["kind"] == "none":
+            totems.setdefault(r["n_totems"], []).append(_metric(r, "recon_L1"))
+    stages = {}
+    for r in joint:
+        for k, v in (r.get("timing_s") or {}).items():
+            if isinstance(v, (int, float)):
+                stages.setdefault(k, []).append(v)
+    return {
+        "table1": table1, "table2": table2,
+        "accuracy": {
+            "untouched_consistent": _frac(r["verdict"] == "consistent" for r in untouched),
+            "manipulated_inconsistent": _frac(r["verdict"] == "inconsistent"
+                                              for r in manipulated),
+            "n_untouched": len(untouched), "n_manipulated": len(manipulated)},
+        "totems_study": {int(n): _mean(v) for n, v in sorted(totems.items())},
+        "time_per_stage_s": {k: _mean(v) for k, v in stages.items()},
+        "failed": [{"scene": r["name"], "mode": r["mode"], "error": r.get("error")}
+                   for r in runs if r["status"] != "ok"],
+    }
+
+
+def _frac(flags):
+    flags = list(flags)
+    return float(np.mean(flags)) if flags else None
+
+
+def _fmt(x, digits=3):
+    return "–" if x is None else f"{x:.{digits}f}"
+
+
+def markdown(bench: dict) -> str:
+    """The tables of ``bench.md``: ours beside the paper's."""
+    s = bench["summary"]
+    lines = [f"# totems bench\n",
+             f"{bench['scenes']} scenes, {len(bench['runs'])} runs, {bench['jobs']} jobs, "
+             f"{bench['wall_s']:.0f} s wall.\n",
+             "## Table 1: camera-view reconstruction and pose (untouched scenes)\n",
+             "| preset | totem pose | recon L1 | paper | pose L1 (m) | paper | n |",
+             "|---|---|---|---|---|---|---|"]
+    for preset, modes in sorted(s["table1"].items()):
+        for mode in ("initial", "joint", "oracle"):
+            if mode not in modes:
+                continue
+            m = modes[mode]
+            paper = PAPER_TABLE1.get(preset, {}).get(mode, (None, None))
+            lines.append(f"| {preset} | {mode} | {_fmt(m['recon_L1'])} | {_fmt(paper[0])} "
+                         f"| {_fmt(m['pose_L1'])} | {_fmt(paper[1])} | {m['n']} |")
+    lines += ["", "## Table 2: patch AP per manipulation (joint fit)\n",
+              "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | n |",
+              "|---|---|---|---|---|---|"]
+    for kind, m in sorted(s["table2"].items()):
+        paper = PAPER_TABLE2.get(kind, (None, None))
+        lines.append(f"| {kind} | {_fmt(m['ap_L1'])} | {_fmt(paper[0])} | "
+                     f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {m['n']} |")
+    a = s["accuracy"]
+    lines += ["", "## Image level\n",
+              f"- untouched judged consistent: {_fmt(a['untouched_consistent'], 2)} "
+              f"(n = {a['n_untouched']})",
+              f"- manipulated judged inconsistent: {_fmt(a['manipulated_inconsistent'], 2)} "
+              f"(n = {a['n_manipulated']})"]
+    if len(s["totems_study"]) > 1:
+        lines += ["", "## Number of totems (recon L1)\n", "| totems | ours | paper |",
+                  "|---|---|---|"]
+        lines += [f"| {n} | {_fmt(v)} | {_fmt(PAPER_TOTEMS.get(n))} |"
+                  for n, v in s["totems_study"].items()]
+    if s["time_per_stage_s"]:
+        lines += ["", "## Time per stage (s, mean over joint runs)\n"]
+        lines += [f"- {k}: {_fmt(v, 1)}" for k, v in sorted(s["time_per_stage_s"].items())]
+    if s["failed"]:
+        lines += ["", "## Failed runs\n"]
+        lines += [f"- {f['scene']} ({f['mode']}): {f['error']}" for f in s["failed"]]
+    return "\n".join(lines) + "\n"
+
+
+CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
+              "threshold", "recon_L1", "pose_L1", "patch_ap_L1", "patch_ap_SSIM",
+              "wall_s", "error"]
+
+
+def csv_text(runs: list[dict]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
+    w.writeheader()
+    for r in runs:
+        w.writerow({**r, **(r.get("metrics") or {})})
+    return buf.getvalue()
+
+
+def write_outputs(bench: dict, out: Path) -> None:
+    folder.write_json(out / "bench.json", bench)
+    folder.write_bytes(out / "bench.csv", csv_text(bench["runs"]).encode())
+    folder.write_bytes(out / "bench.md", markdown(bench).encode())
+    write_plots(bench["summary"], out / "plots")
+
+
+def write_plots(summary: dict, out: Path) -> None:
+    """AP per kind, recon L1 per preset and mode, time per stage, the totem study."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def save(fig, name):
+        buf = io.BytesIO()
+        fig.tight_layout()
+        fig.savefig(buf, format="png", dpi=100)
+        plt.close(fig)
+        folder.write_bytes(out / name, buf.getvalue())
+
+    t2 = summary["table2"]
+    if t2:
+        kinds = sorted(t2)
+        x = np.arange(len(kinds))
+        fig, ax = plt.subplots(figsize=(6, 3))
+        ax.bar(x - 0.2, [t2[k]["ap_L1"] or 0 for k in kinds], 0.4, label="L1")
+        ax.bar(x + 0.2, [t2[k]["ap_SSIM"] or 0 for k in kinds], 0.4, label="SSIM")
+        ax.set_xticks(x, kinds)
+        ax.set_ylim(0, 1)
+        ax.set_ylabel("patch AP")
+        ax.legend()
+        save(fig, "ap_per_kind.png")
+    t1 = summary["table1"]
+    if t1:
+        fig, ax = plt.subplots(figsize=(6, 3))
+        labels, values = [], []
+        for p, modes in sorted(t1.items()):
+            for m, v in modes.items():
+                labels.append(f"{p}\n{m}")
+                values.append(v["recon_L1"] or 0)
+        ax.bar(range(len(values)), values)
+        ax.set_xticks(range(len(values)), labels, fontsize=8)
+        ax.set_ylabel("recon L1")
+        save(fig, "recon_per_preset.png")
+    stages = summary["time_per_stage_s"]
+    if stages:
+        fig, ax = plt.subplots(figsize=(6, 3))
+        ax.barh(list(stages), [v or 0 for v in stages.values()])
+        ax.set_xlabel("seconds")
+        save(fig, "time_per_stage.png")
+    study = summary["totems_study"]
+    if len(study) > 1:
+        fig, ax = plt.subplots(figsize=(4, 3))
+        ax.plot(list(study), list(study.values()), "o-", label="ours")
+        paper = [n for n in study if n in PAPER_TOTEMS]
+        ax.plot(paper, [PAPER_TOTEMS[n] for n in paper], "s--", label="paper")
+        ax.set_xlabel("number of totems")
+        ax.set_ylabel("recon L1")
+        ax.legend()
+        save(fig, "totems_study.png")
