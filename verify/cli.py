@@ -124,11 +124,11 @@ def _verify(args, scene, fit, fit_seconds=None) -> dict:
 
 
 def cmd_verify(args) -> dict:
-    from inverse.fit import load_fit, scene_fingerprint
     from scenes.errors import BadInput
     from scenes.folder import read_scene
 
     scene = read_scene(args.scene)
+    from inverse.fit import load_fit, scene_fingerprint
     fit_dir = Path(args.fit) if args.fit else _out_dir(args) / "fit"
     if args.fit or (fit_dir / "fit.json").is_file():
         fit = load_fit(fit_dir)

@@ -1,0 +1,88 @@
+"""The command line: usage and bad input give exit 2 and one line, never a traceback."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from scenes import folder
+
+
+def totems(*args, cwd=None):
+    """Run the installed CLI in a fresh process, as a user would."""
+    return subprocess.run([sys.executable, "-m", "verify.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def assert_one_line_error(proc):
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    return lines[0]
+
+
+def tiny_scene(path, size=(64, 48)):
+    """A minimal valid scene folder: a flat photo with one round totem mask."""
+    W, H = size
+    yy, xx = np.mgrid[:H, :W]
+    mask = (xx - 32) ** 2 + (yy - 30) ** 2 < 8 ** 2
+    K = np.array([[60.0, 0, (W - 1) / 2], [0, 60.0, (H - 1) / 2], [0, 0, 1]])
+    image = np.full((H, W, 3), 0.5, np.float32)
+    return folder.write_scene(path, image=image, K=K, masks=[mask], radius=0.1, ior=1.52)
+
+
+def test_usage_error_is_exit_2():
+    line = assert_one_line_error(totems("fit"))
+    assert "scene" in line
+
+
+def test_unknown_verb_is_exit_2():
+    assert_one_line_error(totems("frobnicate"))
+
+
+def test_missing_scene_folder(tmp_path):
+    line = assert_one_line_error(totems("fit", tmp_path / "nope"))
+    assert "not found" in line
+
+
+def test_bad_size_argument(tmp_path):
+    line = assert_one_line_error(totems("scene", "make", tmp_path / "s", "--size", "big"))
+    assert "WxH" in line
+
+
+def test_malicious_calib_is_refused_and_not_run(tmp_path):
+    scene = tiny_scene(tmp_path / "s")
+    marker = tmp_path / "ran"
+
+    class Evil:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    np.save(scene / "calib.npy", np.array({"mtx": Evil()}, dtype=object), allow_pickle=True)
+    line = assert_one_line_error(totems("verify", scene))
+    assert "calib.npy" in line
+    assert not marker.exists()
+
+
+def test_mask_of_another_size(tmp_path):
+    scene = tiny_scene(tmp_path / "s")
+    folder.write_image(scene / "totem_masks" / "totem_001.png", np.ones((10, 10), bool))
+    line = assert_one_line_error(totems("check", scene))
+    assert "totem_001" in line
+
+
+def test_nan_key(tmp_path):
+    scene = tiny_scene(tmp_path / "s")
+    (scene / "totems.json").write_text('{"radius": NaN, "ior": 1.5}')
+    line = assert_one_line_error(totems("fit", scene))
+    assert "radius" in line
+
+
+def test_inputs_untouched_on_error(tmp_path):
+    scene = tiny_scene(tmp_path / "s")
+    (scene / "totems.json").write_text('{"radius": -1, "ior": 1.5}')
+    before = sorted(p.relative_to(scene) for p in scene.rglob("*"))
+    assert_one_line_error(totems("check", scene))
+    assert sorted(p.relative_to(scene) for p in scene.rglob("*")) == before
