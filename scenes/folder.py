@@ -215,7 +215,7 @@ def read_calib(path) -> dict:
             or K[1, 1] <= 0:
         raise BadInput(f"{path}: 'mtx' must be a finite 3x3 matrix with fx, fy > 0")
     out = {"mtx": K}
-    for key in ("dist", "roi"):
+    for key in ("dist", "roi", "mtx_raw"):
         if key in calib and calib[key] is not None:
             out[key] = np.asarray(calib[key], dtype=np.float64)
     return out
@@ -229,9 +229,15 @@ def _is_numeric(x) -> bool:
     return True
 
 
-def write_calib(path, K: np.ndarray, dist=None, roi=None) -> None:
-    """Write ``calib.npy`` as the NeRF path does (a pickled dict)."""
+def write_calib(path, K: np.ndarray, dist=None, roi=None, mtx_raw=None) -> None:
+    """Write ``calib.npy`` as the NeRF path does (a pickled dict).
+
+    ``mtx_raw``: the lens' K in the raw photo, when it differs from ``K`` (the K of the
+    undistorted image); see ``scenes/calibrate.py``.
+    """
     calib = {"mtx": np.asarray(K, dtype=np.float64)}
+    if mtx_raw is not None:
+        calib["mtx_raw"] = np.asarray(mtx_raw, dtype=np.float64)
     if dist is not None:
         calib["dist"] = np.asarray(dist, dtype=np.float64)
     if roi is not None:
