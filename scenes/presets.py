@@ -1,0 +1,325 @@
+"""Random synthetic scenes as plain descriptions (dicts), as in the paper's Sec. 5.1.
+
+Two presets, both seen by an OpenCV camera at the origin whose frame is the world
+frame (+x right, +y down, +z forward; metres):
+
+``box``
+    A closed room like a Cornell box: floor, ceiling and four walls papered with
+    random textures (photographs and textures that scikit-image ships), random boxes,
+    spheres and cylinders on the floor, one or two rectangular area lights under the
+    ceiling.
+``envmap``
+    A textured ground plane with random objects on it, lit by and surrounded by an
+    environment map made from a bundled photograph.
+
+Both carry ``n_totems`` glass spheres floating between the camera and the scene, near
+the bottom of the frame, each wholly inside the image and apart from the others in
+the image, about 1-2 m from the camera. The camera looks slightly down on the floor:
+the room is pitched in the camera frame, the camera itself is never moved.
+
+The description is JSON-serialisable and is the whole scene: ``render.render(desc)``
+draws it again (the format is documented in :mod:`scenes.render`). The 3D scene does
+not depend on the image size: the same seed at 160x120 and 640x480 is the same room.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inverse import camera
+from scenes.errors import BadInput
+
+PRESETS = ("box", "envmap")
+FORMAT = 1
+FOV_X_DEG = 60.0
+PITCH_DEG = 14.0            # camera looks this much below the horizon
+CAMERA_HEIGHT = 1.0         # metres above the floor
+MAX_DEPTH = 8               # path length: enough for light to pass through the glass
+
+# Textures that scikit-image ships (``skimage.data.<name>``), no download needed.
+# Grey ones are tinted with a random colour; photographs are used as they are.
+GREY_TEXTURES = ("brick", "grass", "gravel", "camera", "moon", "coins", "text",
+                 "checkerboard", "clock", "page")
+PHOTO_TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field",
+                  "immunohistochemistry", "colorwheel", "retina", "cat")
+WALL_TEXTURES = ("brick", "grass", "gravel", "camera", "moon", "coins", "checkerboard",
+                 "text", "hubble_deep_field", "immunohistochemistry", "astronaut")
+FLOOR_TEXTURES = ("gravel", "brick", "grass", "checkerboard", "coins")
+ENV_PHOTOS = ("rocket", "coffee", "chelsea", "astronaut", "hubble_deep_field")
+
+TOTEM_RADIUS = 0.1
+TOTEM_IOR = 1.52
+
+
+# --------------------------------------------------------------------------- frames
+
+def _pitch(deg: float) -> np.ndarray:
+    """Rotation taking room coordinates (y down along gravity, z forward horizontal)
+    to the camera frame of a camera pitched ``deg`` degrees down."""
+    t = np.radians(deg)
+    c, s = np.cos(t), np.sin(t)
+    # camera down = (0, c, -s) and camera forward = (0, s, c) in room coordinates
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _affine(M: np.ndarray, t) -> np.ndarray:
+    A = np.eye(4)
+    A[:3, :3] = M
+    A[:3, 3] = t
+    return A
+
+
+def panel(center, normal, down, width, height) -> np.ndarray:
+    """``to_world`` of Mitsuba's ``rectangle`` ([-1, 1]^2, z = 0, normal +z) as a
+    ``width`` x ``height`` panel whose front faces ``normal``.
+
+    ``down`` is the direction in which the texture's rows go as seen from the front;
+    the texture then reads upright and not mirrored (columns go along
+    ``right = down x forward`` with ``forward = -normal``, as in the OpenCV frame).
+    """
+    n = np.asarray(normal, float)
+    n /= np.linalg.norm(n)
+    d = np.asarray(down, float)
+    d -= n * (d @ n)
+    d /= np.linalg.norm(d)
+    r = np.cross(d, -n)
+    return _affine(np.stack([r * width / 2, d * height / 2, n], axis=1), center)
+
+
+def _yaw(deg: float) -> np.ndarray:
+    """Rotation about the room's vertical axis (y)."""
+    t = np.radians(deg)
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+# --------------------------------------------------------------------------- materials
+
+def _random_rgb(rng, saturation=(0.4, 0.8), value=(0.35, 0.8)) -> list:
+    """A random linear RGB reflectance from a random hue."""
+    from colorsys import hsv_to_rgb
+    rgb = hsv_to_rgb(rng.uniform(), rng.uniform(*saturation), rng.uniform(*value))
+    return [round(float(c) ** 2.2, 4) for c in rgb]      # sRGB-ish -> linear
+
+
+def _texture_material(rng, name: str, uv_scale=(1.0, 1.0)) -> dict:
+    """A diffuse material textured by ``skimage.data.<name>``; grey ones are tinted."""
+    tint = _random_rgb(rng, (0.3, 0.7), (0.75, 1.0)) if name in GREY_TEXTURES \
+        else [1.0, 1.0, 1.0]
+    return {"type": "diffuse", "texture": name, "tint": tint,
+            "uv_scale": [float(uv_scale[0]), float(uv_scale[1])]}
+
+
+def _object_material(rng) -> dict:
+    if rng.uniform() < 0.6:
+        name = str(rng.choice(PHOTO_TEXTURES + ("brick", "checkerboard", "coins")))
+        return _texture_material(rng, name)
+    return {"type": "diffuse", "rgb": _random_rgb(rng)}
+
+
+# --------------------------------------------------------------------------- objects
+
+def _floor_objects(rng, R: np.ndarray, floor_y: float, *, x_range, z_range, n_range,
+                   first_id: int) -> list:
+    """Random boxes, spheres and cylinders standing on the floor, footprints apart."""
+    n = int(rng.integers(n_range[0], n_range[1] + 1))
+    placed, objects = [], []
+    for _ in range(200):
+        if len(objects) == n:
+            break
+        kind = str(rng.choice(["cube", "sphere", "cylinder"]))
+        if kind == "cube":
+            w, h, d = rng.uniform(0.2, 0.5), rng.uniform(0.2, 0.7), rng.uniform(0.2, 0.5)
+            foot = 0.5 * np.hypot(w, d)
+        elif kind == "sphere":
+            rad = rng.uniform(0.12, 0.3)
+            foot = rad
+        else:
+            rad, h = rng.uniform(0.08, 0.22), rng.uniform(0.25, 0.8)
+            foot = rad
+        x, z = rng.uniform(*x_range), rng.uniform(*z_range)
+        if any(np.hypot(x - px, z - pz) < foot + pf + 0.05 for px, pz, pf in placed):
+            continue
+        placed.append((x, z, foot))
+        yaw = _yaw(rng.uniform(0.0, 360.0))
+        if kind == "cube":          # Mitsuba cube: [-1, 1]^3
+            local = _affine(yaw @ np.diag([w / 2, h / 2, d / 2]), [x, floor_y - h / 2, z])
+        elif kind == "sphere":      # unit sphere at the origin
+            local = _affine(yaw * rad, [x, floor_y - rad, z])
+        else:                       # Mitsuba cylinder: radius 1 about z, z in [0, 1]
+            up = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])   # z -> -y (up)
+            local = _affine(yaw @ up @ np.diag([rad, rad, h]), [x, floor_y, z])
+        objects.append({
+            "id": first_id + len(objects), "name": f"{kind}_{len(objects)}", "kind": kind,
+            "to_world": (_affine(R, [0, 0, 0]) @ local).tolist(),
+            "material": _object_material(rng), "removable": True})
+    return objects
+
+
+def _room(rng, R: np.ndarray) -> tuple[list, list]:
+    """Walls, floor and ceiling (ids 0-5) and one or two ceiling lights."""
+    half_w, ceil, front, back = 1.6, -1.5, -1.5, 5.0
+    floor = CAMERA_HEIGHT
+    depth, cz = back - front, 0.5 * (back + front)
+    height, cy = floor - ceil, 0.5 * (floor + ceil)
+    wall_tex = [str(t) for t in rng.choice(WALL_TEXTURES, size=5, replace=False)]
+    floor_tex = str(rng.choice(FLOOR_TEXTURES))
+    up, fwd = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    # (name, centre, inward normal, texture-down direction, width, height)
+    specs = [
+        ("floor", [0, floor, cz], up, -fwd, 2 * half_w, depth),
+        ("ceiling", [0, ceil, cz], -up, -fwd, 2 * half_w, depth),
+        ("back_wall", [0, cy, back], -fwd, -up, 2 * half_w, height),
+        ("left_wall", [-half_w, cy, cz], [1, 0, 0], -up, depth, height),
+        ("right_wall", [half_w, cy, cz], [-1, 0, 0], -up, depth, height),
+        ("front_wall", [0, cy, front], fwd, -up, 2 * half_w, height),
+    ]
+    textures = [floor_tex, wall_tex[0], wall_tex[1], wall_tex[2], wall_tex[3], wall_tex[4]]
+    objects = []
+    for i, ((name, c, n, d, w, h), tex) in enumerate(zip(specs, textures)):
+        repeat = max(1.0, round(max(w, h) / 1.6))
+        uv = (repeat, repeat * h / w) if tex in GREY_TEXTURES else (1.0, 1.0)
+        to_world = _affine(R, [0, 0, 0]) @ panel(c, n, d, w, h)
+        objects.append({"id": i, "name": name, "kind": "rectangle",
+                        "to_world": to_world.tolist(),
+                        "material": _texture_material(rng, tex, uv), "removable": False})
+    n_lights = int(rng.integers(1, 3))
+    lights = []
+    for j in range(n_lights):
+        x = 0.0 if n_lights == 1 else (-0.6 if j == 0 else 0.6)
+        z = rng.uniform(1.8, 3.0)
+        w, d = rng.uniform(0.6, 0.9), rng.uniform(0.6, 0.9)
+        power = 7.0 / n_lights / (w * d)
+        warm = rng.uniform(0.85, 1.0)
+        to_world = _affine(R, [0, 0, 0]) @ panel([x, ceil + 0.01, z], -up, -fwd, w, d)
+        lights.append({"name": f"light_{j}", "kind": "rectangle",
+                       "to_world": to_world.tolist(),
+                       "radiance": [round(power, 4), round(power * warm, 4),
+                                    round(power * warm ** 2, 4)]})
+    return objects, lights
+
+
+def _outdoor(rng, R: np.ndarray) -> tuple[list, dict]:
+    """A large textured ground plane (id 0) and an environment map."""
+    tex = str(rng.choice(FLOOR_TEXTURES))
+    size = 16.0
+    to_world = _affine(R, [0, 0, 0]) @ panel([0, CAMERA_HEIGHT, 4.0], [0, -1, 0],
+                                              [0, 0, -1], size, size)
+    ground = {"id": 0, "name": "ground", "kind": "rectangle", "to_world": to_world.tolist(),
+              "material": _texture_material(rng, tex, (8.0, 8.0)), "removable": False}
+    # Mitsuba's envmap has +y up; the room's up is -y, pitched into the camera frame.
+    flip = np.diag([-1.0, -1.0, 1.0])
+    turn = _yaw(rng.uniform(0.0, 360.0))
+    env = {"image": str(rng.choice(ENV_PHOTOS)), "scale": round(float(rng.uniform(1.6, 2.4)), 3),
+           "to_world": _affine(R @ turn @ flip, [0, 0, 0]).tolist()}
+    return [ground], env
+
+
+# --------------------------------------------------------------------------- totems
+
+def sphere_outline(K: np.ndarray, center, radius: float, n: int = 64) -> np.ndarray:
+    """Pixels (n, 2) of a sphere's silhouette: the projected circle of tangency."""
+    P = np.asarray(center, float)
+    dist2 = P @ P
+    C = P * (1.0 - radius ** 2 / dist2)                # centre of the tangency circle
+    T = radius * np.sqrt(1.0 - radius ** 2 / dist2)    # its radius
+    a = np.cross(P, [0.0, 1.0, 0.0] if abs(P[1]) < 0.9 * np.sqrt(dist2) else [1.0, 0, 0])
+    a /= np.linalg.norm(a)
+    b = np.cross(P / np.sqrt(dist2), a)
+    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)[:, None]
+    return camera.project(K, C + T * (np.cos(t) * a + np.sin(t) * b))
+
+
+def place_totems(rng, K: np.ndarray, size, n: int, radius: float, ior: float,
+                 *, margin: float = 0.01) -> list:
+    """``n`` sphere centres near the bottom of the frame, left to right.
+
+    Each sphere's image lies inside the frame with ``margin * W`` pixels to spare and
+    the images are disjoint (the angle between two centres exceeds the sum of the
+    spheres' angular radii). Depths are 1.1-1.7 m. Positions are drawn in fractions
+    of the image, so the 3D centres depend on the aspect ratio but not on the size.
+    """
+    W, H = size
+    margin_px = margin * W
+    if n < 1:
+        return []
+    for _ in range(2000):
+        slots = (np.arange(n) + 0.5 + rng.uniform(-0.25, 0.25, n)) / n
+        u = K[0, 2] + (0.06 + 0.88 * slots - 0.5) * W
+        v = K[1, 2] + (rng.uniform(0.72, 0.84, n) - 0.5) * H
+        z = rng.uniform(1.1, 1.7, n)
+        P = np.linalg.solve(K, np.stack([u, v, np.ones(n)])).T * z[:, None]
+        ok = True
+        for p in P:
+            uv = sphere_outline(K, p, radius)
+            ok &= bool(uv.min() > margin_px and uv[:, 0].max() < W - 1 - margin_px
+                       and uv[:, 1].max() < H - 1 - margin_px)
+        d = P / np.linalg.norm(P, axis=1, keepdims=True)
+        alpha = np.arcsin(radius / np.linalg.norm(P, axis=1))
+        pad = margin_px / K[0, 0]
+        for i in range(n):
+            for j in range(i + 1, n):
+                ok &= bool(np.arccos(np.clip(d[i] @ d[j], -1, 1)) > alpha[i] + alpha[j] + pad)
+        if ok:
+            P = P[np.argsort(P[:, 0] / P[:, 2])]
+            return [{"center": [round(float(c), 6) for c in p], "radius": float(radius),
+                     "ior": float(ior)} for p in P]
+    raise BadInput(f"cannot fit {n} totems of radius {radius} m side by side in a "
+                   f"{W}x{H} image; use fewer totems or a smaller radius")
+
+
+# --------------------------------------------------------------------------- public
+
+def describe(preset: str, seed: int, size=(640, 480), n_totems: int = 4,
+             radius: float = TOTEM_RADIUS, ior: float = TOTEM_IOR) -> dict:
+    """A random scene of ``preset`` drawn from ``seed``, as a JSON-ready dict.
+
+    Parameters
+    ----------
+    preset : "box" or "envmap".
+    seed : the random seed; the same seed gives the same description.
+    size : (W, H) in pixels; the 3D scene does not depend on it.
+    n_totems : number of glass spheres (0 allowed: a scene without totems).
+    radius : totem radius in metres.
+    ior : totems' index of refraction.
+
+    Returns
+    -------
+    dict in the format documented in :mod:`scenes.render`.
+    """
+    if preset not in PRESETS:
+        raise BadInput(f"unknown preset {preset!r}; use one of {', '.join(PRESETS)}")
+    try:
+        W, H = int(size[0]), int(size[1])
+    except (TypeError, ValueError, IndexError):
+        raise BadInput(f"size must be (width, height) in pixels, got {size!r}") from None
+    if not (16 <= W <= 8192 and 16 <= H <= 8192):
+        raise BadInput(f"size must be between 16 and 8192 pixels a side, got {W}x{H}")
+    if not (0 <= int(n_totems) <= 8):
+        raise BadInput(f"number of totems must be 0..8, got {n_totems}")
+    if not (np.isfinite(radius) and 0.01 <= radius <= 0.3):
+        raise BadInput(f"totem radius must be 0.01..0.3 m, got {radius}")
+    if not (np.isfinite(ior) and 1.0 < ior < 4.0):
+        raise BadInput(f"totem ior must lie in (1, 4), got {ior}")
+    rng = np.random.default_rng([int(seed), PRESETS.index(preset)])
+    K = camera.intrinsics(W, H, FOV_X_DEG)
+    R = _pitch(PITCH_DEG)
+    if preset == "box":
+        objects, lights = _room(rng, R)
+        env = None
+        x_range, z_range = (-1.2, 1.2), (2.4, 4.4)
+    else:
+        objects, env = _outdoor(rng, R)
+        lights = []
+        x_range, z_range = (-1.5, 1.5), (2.4, 5.0)
+    objects += _floor_objects(rng, R, CAMERA_HEIGHT, x_range=x_range, z_range=z_range,
+                              n_range=(3, 6), first_id=len(objects))
+    for j, light in enumerate(lights):
+        light["id"] = len(objects) + j
+    # The totems are drawn from their own stream so that their placement does not
+    # change the room and vice versa.
+    trng = np.random.default_rng([int(seed), PRESETS.index(preset), 7])
+    totems = place_totems(trng, K, (W, H), int(n_totems), float(radius), float(ior))
+    return {"format": FORMAT, "preset": preset, "seed": int(seed), "size": [W, H],
+            "K": K.tolist(), "fov_x_deg": FOV_X_DEG, "max_depth": MAX_DEPTH,
+            "objects": objects, "lights": lights, "envmap": env, "totems": totems}
