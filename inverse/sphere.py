@@ -200,28 +200,34 @@ class TotemPath(NamedTuple):
 def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
     """Trace camera rays through totems; see :func:`totem_rays` (this returns more).
 
-    On lanes where the ray misses, the computation runs on the ray through the
-    centre instead (finite values and derivatives), and the outputs are the input
-    ray: ``D = E = o``, ``d_mid = d_out = d``, ``T = 0``.
+    Lanes that are not valid (miss, totem behind or around the camera, grazing) are
+    traced along the ray through the centre instead, so no huge or NaN derivative is
+    ever formed, and their outputs are the input ray: ``D = E = o``,
+    ``d_mid = d_out = d``, ``T = 0``, with no gradient with respect to ``P``.
     """
-    o, d, P = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f)
+    o, d, P = _vec(o, mi.Point3f), dr.normalize(_vec(d)), _vec(P, mi.Point3f)
     t_near, _, hit = intersect(o, d, P, R)
     hit &= t_near > 0                        # camera outside the totem, totem ahead
-    # Misses: trace the central ray instead, so no NaN reaches any gradient.
-    to_c = dr.normalize(mi.Vector3f(P - o))
-    d_safe = dr.select(hit, d, to_c)
-    t_near_s, _, _ = intersect(o, d_safe, P, R)
-    D = o + t_near_s * d_safe
+    # Incidence cosine at D from the chord: cos = sqrt(R^2 - l^2) / R, l the
+    # distance from the centre to the ray's line.
+    f = mi.Vector3f(o - P)
+    l2 = dr.squared_norm(f - dr.dot(f, d) * d)
+    cos_geom = dr.safe_sqrt(1 - l2 / dr.square(R))
+    ok = hit & (cos_geom >= cos_min)
+    # Invalid lanes: trace the central ray instead (well conditioned everywhere).
+    d_safe = dr.select(ok, d, dr.normalize(mi.Vector3f(P - o)))
+    t_in, _, _ = intersect(o, d_safe, P, R)
+    D = o + t_in * d_safe
     d_mid, E, d_out, T, cos_in, _, tir = refract_in_out(d_safe, D, P, R, eta)
-    valid = hit & ~tir & (cos_in >= cos_min)
+    valid = ok & ~tir
     return TotemPath(
-        D=mi.Point3f(dr.select(hit, D, o)),
-        d_mid=mi.Vector3f(dr.select(hit, d_mid, d)),
-        E=mi.Point3f(dr.select(hit, E, o)),
-        d_out=mi.Vector3f(dr.select(hit, d_out, d)),
+        D=mi.Point3f(dr.select(valid, D, o)),
+        d_mid=mi.Vector3f(dr.select(valid, d_mid, d)),
+        E=mi.Point3f(dr.select(valid, E, o)),
+        d_out=mi.Vector3f(dr.select(valid, d_out, d)),
         T=dr.select(valid, T, 0.0),
-        cos_in=dr.select(hit, cos_in, 0.0),
-        t_in=dr.select(hit, t_near, 0.0),
+        cos_in=dr.select(ok, cos_in, dr.detach(dr.select(hit, cos_geom, 0.0))),
+        t_in=dr.select(valid, t_in, 0.0),
         valid=valid,
     )
 
@@ -234,7 +240,8 @@ def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
     o : mi.Point3f
         Camera-ray origins, metres, camera frame (usually 0).
     d : mi.Vector3f
-        Unit camera-ray directions, camera frame (e.g. ``camera.pixel_rays``).
+        Camera-ray directions, camera frame (e.g. ``camera.pixel_rays``); normalised
+        here, so derivatives along ``d`` itself are 0.
     P : mi.Point3f
         Centre of the totem each ray is traced through, metres, camera frame
         (gather it per ray, e.g. ``dr.gather(mi.Point3f, centers, totem_index)``).
@@ -250,9 +257,9 @@ def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
     Returns
     -------
     o_out : mi.Point3f
-        Exit point ``E`` on the sphere, metres (``o`` where the ray misses).
+        Exit point ``E`` on the sphere, metres (``o`` where not valid).
     d_out : mi.Vector3f
-        Unit exit direction (``d`` where the ray misses).
+        Unit exit direction (``d`` where not valid).
     T : mi.Float
         Fresnel transmittance ``(1 - F1)(1 - F2)`` of unpolarised light; 0 where
         invalid.
