@@ -125,10 +125,56 @@ def calibrate(images, board=(9, 6), square: float = 0.025, *, alpha: float = 0.0
                        f"corners, COLSxROWS) and that the whole board is in view")
 
     rms, K_raw, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None)
-    K, roi = cv2.getOptimalNewCameraMatrix(K_raw, dist, size, alpha, size)
-    return {"mtx": np.asarray(K, float), "dist": np.asarray(dist, float).ravel(),
-            "roi": [int(v) for v in roi], "mtx_raw": np.asarray(K_raw, float),
+    K = undistorted_K(K_raw, dist, size, alpha=alpha)
+    return {"mtx": K, "dist": np.asarray(dist, float).ravel(),
+            "roi": valid_roi(K_raw, dist, K, size), "mtx_raw": np.asarray(K_raw, float),
             "rms": float(rms), "size": size, "used": used}
+
+
+def undistorted_K(K_raw, dist, size, *, alpha: float = 0.0) -> np.ndarray:
+    """The K of the undistorted image, square pixels (fx == fy, as the renderer needs).
+
+    ``cv2.getOptimalNewCameraMatrix`` scales x and y separately; its larger focal
+    length (alpha < 0.5: no black border) or smaller (alpha >= 0.5: every source pixel
+    kept) is used for both axes.
+    """
+    import cv2
+
+    K, _ = cv2.getOptimalNewCameraMatrix(np.asarray(K_raw, float), np.asarray(dist, float),
+                                         tuple(size), alpha, tuple(size))
+    f = max(K[0, 0], K[1, 1]) if alpha < 0.5 else min(K[0, 0], K[1, 1])
+    K = np.asarray(K, float).copy()
+    K[0, 0] = K[1, 1] = f
+    return K
+
+
+def valid_roi(K_raw, dist, K, size) -> list[int]:
+    """[x, y, w, h]: a rectangle of the undistorted image (K) where every pixel has a
+    source pixel in the raw photo (the part the NeRF path keeps with ``roi``)."""
+    from scenes.ingest import undistort
+
+    W, H = size
+    valid = undistort(np.ones((H, W), bool), K_raw, dist, K, nearest=True)
+    for scale in np.linspace(1.0, 0.02, 99):     # largest centred box of the image's shape
+        w, h = max(1, round(W * scale)), max(1, round(H * scale))
+        x0, y0 = (W - w) // 2, (H - h) // 2
+        x1, y1 = x0 + w, y0 + h
+        if valid[y0:y1, x0:x1].all():
+            break
+    else:
+        return [0, 0, 0, 0]
+    grown = True
+    while grown:                                 # then push each side out while valid
+        grown = False
+        if x0 > 0 and valid[y0:y1, x0 - 1].all():
+            x0, grown = x0 - 1, True
+        if x1 < W and valid[y0:y1, x1].all():
+            x1, grown = x1 + 1, True
+        if y0 > 0 and valid[y0 - 1, x0:x1].all():
+            y0, grown = y0 - 1, True
+        if y1 < H and valid[y1, x0:x1].all():
+            y1, grown = y1 + 1, True
+    return [int(x0), int(y0), int(x1 - x0), int(y1 - y0)]
 
 
 def write_calib(calib: dict, path) -> Path:

@@ -8,6 +8,7 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from scenes import folder
+from scenes.calibrate import undistorted_K, valid_roi
 from scenes.errors import BadInput
 from scenes.ingest import ingest
 
@@ -38,7 +39,9 @@ def _distort(img, K):
 
 @pytest.fixture
 def lens(tmp_path):
-    K, roi = cv2.getOptimalNewCameraMatrix(K_RAW, DIST, (W, H), 0.0, (W, H))
+    K = undistorted_K(K_RAW, DIST, (W, H))
+    roi = valid_roi(K_RAW, DIST, K, (W, H))
+    assert K[0, 0] == K[1, 1] and roi == [0, 0, W, H]     # alpha 0: no black border
     folder.write_calib(tmp_path / "calib.npy", K, dist=DIST, roi=roi, mtx_raw=K_RAW)
     folder.write_json(tmp_path / "totems.json", {"radius": 0.05, "ior": 1.5})
     return K, tmp_path / "calib.npy", tmp_path / "totems.json"
