@@ -271,3 +271,145 @@ def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
     """
     path = totem_path(o, d, P, R, eta, cos_min=cos_min)
     return path.E, path.d_out, path.T, path.valid
+
+
+def _per_totem(x, n: int) -> mi.Float:
+    """Radius or IoR given once or once per totem, as an ``n``-lane ``mi.Float``."""
+    if isinstance(x, dr.ArrayBase):
+        x = mi.Float(x)
+        if dr.width(x) == 1 and n > 1:
+            x = dr.zeros(mi.Float, n) + x    # broadcast, keeps any gradient
+    else:
+        x = np.asarray(x, dtype=np.float32)
+        if x.size not in (1, n):
+            raise ValueError(f"expected 1 or {n} values (one per totem), got {x.size}")
+        x = mi.Float(np.ascontiguousarray(np.broadcast_to(x.ravel(), (n,))))
+    if dr.width(x) != n:
+        raise ValueError(f"expected 1 or {n} values (one per totem), got {dr.width(x)}")
+    return x
+
+
+def _centers(centers) -> mi.Point3f:
+    """Totem centres as an n-lane ``mi.Point3f`` (numpy (n, 3) accepted)."""
+    return _vec(centers, mi.Point3f)
+
+
+def nearest_totem(o, d, centers, radius):
+    """Index of the first totem each ray meets, analytically (a loop over totems only).
+
+    Parameters
+    ----------
+    o, d : mi.Point3f, mi.Vector3f
+        Camera rays, camera frame, metres.
+    centers : mi.Point3f (n lanes) or numpy (n, 3)
+        Totem centres, metres. Only their values are used (the choice is discrete).
+    radius : float or sequence of n floats
+        Totem radii, metres.
+
+    Returns
+    -------
+    index : mi.Int32
+        Totem index (0..n-1, the order of ``centers``), -1 where no totem is hit.
+    t : mi.Float
+        Ray parameter of the entry point (inf where none).
+    """
+    C = np.array(dr.detach(_centers(centers)), dtype=np.float32).reshape(3, -1).T
+    n = len(C)
+    Rn = np.array(_per_totem(radius, n))
+    o, d = _vec(o, mi.Point3f), dr.normalize(_vec(d))
+    index = dr.full(mi.Int32, -1, dr.width(d))
+    t_best = dr.full(mi.Float, dr.inf, dr.width(d))
+    for j in range(n):                       # totems, not rays
+        t_near, _, hit = intersect(o, d, mi.Point3f(*map(float, C[j])), float(Rn[j]))
+        closer = hit & (t_near > 0) & (t_near < t_best)
+        index = dr.select(closer, j, index)
+        t_best = dr.select(closer, t_near, t_best)
+    return index, dr.detach(t_best)
+
+
+def _trace_indexed(o, d, index, centers, radius, eta, cos_min):
+    """totem_rays for rays already assigned to a totem (index -1: none)."""
+    centers = _centers(centers)
+    n = dr.width(centers)
+    R_n, eta_n = _per_totem(radius, n), _per_totem(eta, n)
+    has = index >= 0
+    idx = mi.UInt32(dr.select(has, index, 0))
+    # Gathers from attached centres: gradients scatter back to each totem.
+    P = dr.gather(mi.Point3f, centers, idx)
+    R = dr.gather(mi.Float, R_n, idx)
+    eta_j = dr.gather(mi.Float, eta_n, idx)
+    o, d = _vec(o, mi.Point3f), _vec(d)
+    path = totem_path(o, d, P, R, eta_j, cos_min=cos_min)
+    valid = path.valid & has
+    return (mi.Point3f(dr.select(valid, path.E, o)),
+            mi.Vector3f(dr.select(valid, path.d_out, dr.normalize(d))),
+            dr.select(valid, path.T, 0.0), valid)
+
+
+def totem_rays_nearest(o, d, centers, radius, eta, *, cos_min: float = COS_MIN):
+    """:func:`totem_rays` for several totems, each ray through the first it meets.
+
+    ``centers`` (n lanes, ``mi.Point3f``; enable its gradient to fit it), ``radius``
+    and ``eta`` (one value or one per totem) as in :func:`totem_rays`. Returns
+    ``(o_out, d_out, T, valid, index)``, ``index`` as in :func:`nearest_totem`.
+    """
+    index, _ = nearest_totem(o, d, centers, radius)
+    o_out, d_out, T, valid = _trace_indexed(o, d, index, centers, radius, eta, cos_min)
+    return o_out, d_out, T, valid, index
+
+
+def totem_scene(centers, radius, *, extra: dict | None = None) -> mi.Scene:
+    """A Mitsuba scene of the totem spheres (ids ``totem_000``...), plus ``extra`` shapes.
+
+    ``centers`` numpy (n, 3) or ``mi.Point3f``, metres, camera frame; ``radius`` one
+    value or one per totem. For :func:`totem_rays_scene`.
+    """
+    C = np.array(dr.detach(_centers(centers)), dtype=np.float64).reshape(3, -1).T
+    Rn = np.array(_per_totem(radius, len(C)), dtype=np.float64)
+    desc = {"type": "scene"}
+    for j, (c, r) in enumerate(zip(C, Rn)):
+        desc[f"totem_{j:03d}"] = {"type": "sphere", "center": c.tolist(), "radius": float(r)}
+    desc.update(extra or {})
+    return mi.load_dict(desc)
+
+
+def totem_rays_scene(scene, ray, centers, radius, eta, *, shapes=None,
+                     cos_min: float = COS_MIN):
+    """:func:`totem_rays` with Mitsuba choosing which totem (if any) each ray sees.
+
+    ``scene.ray_intersect`` finds the first surface along each camera ray; rays whose
+    first surface is a totem sphere are then traced analytically through the
+    *attached* ``centers`` (Mitsuba's sphere normals and BSDF directions are detached
+    from the centre, so only its choice of shape is used). Occluders in the scene
+    make the ray invalid.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        Holds the totem spheres (e.g. :func:`totem_scene`), maybe other shapes. Its
+        spheres should sit at (or near) ``centers``: a ray Mitsuba sends into a totem
+        that misses the analytic sphere at ``centers`` is flagged invalid.
+    ray : mi.Ray3f
+        Camera rays (``o``, unit ``d``), camera frame, metres.
+    centers : mi.Point3f (n lanes) or numpy (n, 3)
+        Totem centres, metres, in the order of ``shapes``.
+    radius, eta : float or n floats
+        Radii (metres) and IoR ``n_glass / n_air``.
+    shapes : sequence of mi.Shape, optional
+        The totem shapes, in the order of ``centers``; default the scene's shapes
+        whose id starts with ``totem``, sorted by id.
+
+    Returns
+    -------
+    (o_out, d_out, T, valid, index) as :func:`totem_rays_nearest`.
+    """
+    if shapes is None:
+        shapes = sorted((s for s in scene.shapes() if s.id().startswith("totem")),
+                        key=lambda s: s.id())
+    si = scene.ray_intersect(ray)
+    index = dr.full(mi.Int32, -1, dr.width(ray.d))
+    for j, shape in enumerate(shapes):       # totems, not rays
+        index = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(shape)), j, index)
+    o_out, d_out, T, valid = _trace_indexed(ray.o, ray.d, index, centers, radius, eta,
+                                            cos_min)
+    return o_out, d_out, T, valid, index
