@@ -1,0 +1,238 @@
+"""Verify a scene against its fit: region, heatmaps, verdict, metrics, and the files.
+
+``verify_scene`` turns a scene and a fit into a :class:`Report` (values only);
+``write_verify`` writes the ``verify/`` files of the contract. The key (totem radius and
+IoR) is used for the silhouettes of ``mask_iou`` and is never written: the report carries
+only ``folder.key_fingerprint``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from scenes import folder
+from scenes.errors import BadInput
+from verify import patches, region, verdict as verdict_mod
+
+VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5}
+"""Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
+
+The pictures are scaled to the largest kept patch, as the NeRF path scales per image,
+but never below this floor, so an untouched photo with a good reconstruction stays in
+the cold colours instead of having its noise stretched to red.
+"""
+
+
+@dataclass
+class Report:
+    """Everything ``totems verify`` found; ``to_json`` gives report.json.
+
+    Arrays: ``protected`` (H, W) bool; ``recon``, ``image`` (H, W, 3) sRGB [0, 1];
+    ``totem_mask`` (H, W) bool; ``heatmaps[name]`` (G, G) in heatmap.npy units (see
+    :mod:`verify.patches`); ``keep`` (G, G) patches overlapping the protected region.
+    """
+
+    verdict: str
+    score: float
+    threshold: float
+    protected: np.ndarray
+    protected_fraction: float
+    recon: np.ndarray
+    image: np.ndarray
+    totem_mask: np.ndarray
+    grid: patches.PatchGrid
+    heatmaps: dict
+    keep: np.ndarray
+    decision: verdict_mod.Verdict
+    totems: list
+    metrics: dict
+    key_fingerprint: str
+    timing_s: dict = field(default_factory=dict)
+    versions: dict = field(default_factory=dict)
+
+    @property
+    def drivers(self) -> list:
+        return self.decision.drivers
+
+    def to_json(self) -> dict:
+        """report.json: the contract's fields plus ``drivers`` and ``key_fingerprint``."""
+        return {
+            "verdict": self.verdict,
+            "score": _num(self.score),
+            "threshold": _num(self.threshold),
+            "protected_fraction": _num(self.protected_fraction),
+            "totems": self.totems,
+            "metrics": {k: _num(v) for k, v in self.metrics.items()},
+            "timing_s": {k: _num(v) for k, v in self.timing_s.items()},
+            "versions": self.versions,
+            "drivers": self.drivers,
+            "key_fingerprint": self.key_fingerprint,
+        }
+
+
+def _num(x):
+    return None if x is None or not np.isfinite(x) else round(float(x), 6)
+
+
+# --------------------------------------------------------------------------- geometry
+
+def sphere_silhouette(center: np.ndarray, radius: float, K: np.ndarray,
+                      shape: tuple[int, int]) -> np.ndarray:
+    """Pixels covered by a sphere's image: (H, W) bool.
+
+    A pixel is inside when its ray makes an angle < asin(R / |P|) with the direction
+    of the centre P (camera frame, metres); the whole image when the camera is inside.
+    """
+    from inverse.camera import pixel_rays
+
+    H, W = shape
+    P = np.asarray(center, dtype=np.float64)
+    dist = np.linalg.norm(P)
+    if dist <= radius:
+        return np.ones((H, W), bool)
+    v, u = np.mgrid[0:H, 0:W]
+    d = pixel_rays(K, u, v)
+    cos_half = np.sqrt(1.0 - (radius / dist) ** 2)
+    return d @ (P / dist) > cos_half
+
+
+def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two (H, W) bool masks (0 when both are empty)."""
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 0.0
+
+
+# --------------------------------------------------------------------------- verify
+
+def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
+                 threshold: float | None = None, versions: dict | None = None) -> Report:
+    """Compare the photo with the fit's re-rendered camera view.
+
+    Parameters
+    ----------
+    scene : the scene folder (photo, K, totem masks, key, optional manip_mask).
+    fit : a FitResult (or anything with ``recon`` (H, W, 3) sRGB [0, 1],
+        ``totem_points`` (m, 3) camera frame m, ``centers`` (n, 3), ``initial`` (n, 3)
+        or None, optional ``timings`` dict).
+    truth : ground truth of a synthetic scene, for recon_L1 and pose_L1 (else null).
+    threshold : overrides ``verdict.VERDICT_THRESHOLD``.
+    versions : extra version info for the report (e.g. ``backend.describe()``).
+
+    Raises
+    ------
+    BadInput when the fit does not belong to the scene or the protected region is empty.
+    """
+    t0 = time.perf_counter()
+    image = np.asarray(scene.image, dtype=np.float32)
+    H, W = image.shape[:2]
+    recon = _check_fit(scene, fit)
+    totem_mask = np.asarray(scene.masks, bool).any(axis=0)
+
+    protected = region.protected_region(fit.totem_points, scene.K, (W, H),
+                                        n_totem_pixels=int(totem_mask.sum()))
+    grid = patches.patch_grid(totem_mask)
+    errors = patches.pixel_errors(image, recon)
+    heat = patches.heatmaps(errors, grid, valid=~totem_mask)
+    seen = protected & ~totem_mask
+    cover = patches.patch_fraction(seen, grid)
+    keep = cover > 0
+
+    # verdict on patch means restricted to protected, non-totem pixels (sRGB [0, 1])
+    inside = {name: patches.patch_means(e, grid, seen) for name, e in errors.items()}
+    decision = verdict_mod.decide(inside["L1"], cover, grid, threshold=threshold,
+                                  extra={"SSIM": inside["SSIM"]})
+
+    metrics = {"patch_ap_L1": None, "patch_ap_SSIM": None, "recon_L1": None,
+               "pose_L1": None}
+    if scene.manip_mask is not None:
+        labels = patches.patch_labels(scene.manip_mask, grid)
+        for name in patches.METRICS:
+            metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
+    if truth is not None:
+        clean = np.asarray(truth.clean, dtype=np.float64)
+        if clean.shape == image.shape and seen.any():
+            metrics["recon_L1"] = float(np.abs(recon - clean).mean(axis=2)[seen].mean())
+        true_pose = np.asarray(truth.totem_pose, dtype=np.float64)
+        if true_pose.shape == np.shape(fit.centers):
+            metrics["pose_L1"] = float(np.abs(np.asarray(fit.centers, float) - true_pose)
+                                       .sum(axis=1).mean())
+
+    totems = []
+    centers = np.asarray(fit.centers, dtype=np.float64)
+    initial = getattr(fit, "initial", None)
+    initial = None if initial is None else np.asarray(initial, dtype=np.float64)
+    for j, mask in enumerate(np.asarray(scene.masks, bool)):
+        sil = sphere_silhouette(centers[j], float(scene.radius[j]), scene.K, (H, W))
+        totems.append({
+            "center": [round(float(x), 6) for x in centers[j]],
+            "initial": None if initial is None else [round(float(x), 6)
+                                                     for x in initial[j]],
+            "mask_iou": round(mask_iou(mask, sil), 6)})
+
+    timing = {f"fit_{k}": float(v) for k, v in (getattr(fit, "timings", None) or {}).items()
+              if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    timing["verify"] = time.perf_counter() - t0
+    return Report(
+        verdict=decision.verdict, score=decision.score, threshold=decision.threshold,
+        protected=protected, protected_fraction=float(protected.mean()), recon=recon,
+        image=image, totem_mask=totem_mask, grid=grid, heatmaps=heat, keep=keep,
+        decision=decision, totems=totems, metrics=metrics,
+        key_fingerprint=folder.key_fingerprint(scene.radius, scene.ior),
+        timing_s=timing, versions={**_versions(), **(versions or {})})
+
+
+def _check_fit(scene, fit) -> np.ndarray:
+    """The fit's recon as float32 after checking that the fit matches the scene."""
+    H, W = scene.image.shape[:2]
+    recon = np.asarray(fit.recon, dtype=np.float32)
+    if recon.shape != (H, W, 3):
+        raise BadInput(f"the fit's recon is {recon.shape} but the photo is {(H, W, 3)}; "
+                       f"the fit belongs to another scene: refit it")
+    if not np.all(np.isfinite(recon)):
+        raise BadInput("the fit's recon has non-finite values; refit the scene")
+    centers = np.asarray(fit.centers, dtype=np.float64)
+    if centers.shape != (scene.n_totems, 3) or not np.all(np.isfinite(centers)):
+        raise BadInput(f"the fit has totem centres of shape {centers.shape} but the scene "
+                       f"has {scene.n_totems} totems; refit it")
+    return np.clip(recon, 0.0, 1.0)
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+
+    out = {}
+    for dist in ("totems", "numpy", "scipy", "scikit-image", "scikit-learn"):
+        try:
+            out[dist] = md.version(dist)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+# --------------------------------------------------------------------------- files
+
+def write_verify(report: Report, out_dir) -> Path:
+    """Write the verify/ files of the contract into ``out_dir``; report.json last.
+
+    Each file is written atomically; report.json is written after the pictures, so a
+    folder with a report.json is complete. Returns the path of report.json.
+    """
+    out = Path(out_dir)
+    folder.write_image(out / "protect_mask.png", report.protected)
+    folder.write_image(out / "recon.png", report.recon)
+    for name, heat in report.heatmaps.items():
+        vals = heat[report.keep & np.isfinite(heat)]
+        vmax = max(float(vals.max()) if vals.size else 0.0, VIS_FLOOR[name])
+        folder.write_npy(out / name / "heatmap.npy", heat.astype(np.float64))
+        folder.write_image(out / name / "heatmap_vis.png",
+                           patches.heatmap_vis(heat, report.grid, vmax))
+        folder.write_image(out / name / "heatmap_overlay.png",
+                           patches.heatmap_overlay(report.image, heat, report.grid,
+                                                   report.protected, report.totem_mask,
+                                                   vmax))
+    folder.write_json(out / "report.json", report.to_json())
+    return out / "report.json"
