@@ -52,6 +52,14 @@ def _vec(x, cls=mi.Vector3f):
     raise ValueError(f"expected a 3-vector or an (n, 3) array, got shape {a.shape}")
 
 
+def _float(x):
+    """``mi.Float`` from a Dr.Jit array or a numpy array; Python floats stay floats."""
+    if isinstance(x, (float, int)) or isinstance(x, dr.ArrayBase):
+        return x
+    a = np.asarray(x, dtype=np.float32)
+    return float(a) if a.ndim == 0 else mi.Float(a.ravel())
+
+
 def intersect(o, d, P, R):
     """Both intersections of the rays ``o + t d`` with the sphere ``|X - P| = R``.
 
@@ -81,7 +89,7 @@ def intersect(o, d, P, R):
     hit : mi.Bool
         The line meets the sphere (discriminant > 0) and ``t_far > 0``.
     """
-    o, d, P = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f)
+    o, d, P, R = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f), _float(R)
     f = mi.Vector3f(o - P)
     a = dr.squared_norm(d)
     b = dr.dot(f, d)
@@ -127,7 +135,7 @@ def refract(d, N, eta):
     tir : mi.Bool
         Total internal reflection: no transmitted ray.
     """
-    d, N = _vec(d), _vec(N)
+    d, N, eta = _vec(d), _vec(N), _float(eta)
     wi = -d                                  # Mitsuba's wi points back to the source
     cos_i = dr.dot(wi, N)                    # > 0 from outside, < 0 from inside
     F, cos_t, _eta_it, eta_ti = mi.fresnel(cos_i, eta)
@@ -172,6 +180,7 @@ def refract_in_out(d_in, D, P, R, eta):
         Total internal reflection at either surface.
     """
     d_in, D, P = _vec(d_in), _vec(D, mi.Point3f), _vec(P, mi.Point3f)
+    R, eta = _float(R), _float(eta)
     N1 = mi.Vector3f(D - P) / R
     d_mid, F1, cos_in, tir1 = refract(d_in, N1, eta)
     d_mid = dr.normalize(d_mid)
@@ -206,6 +215,7 @@ def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
     ``d_mid = d_out = d``, ``T = 0``, with no gradient with respect to ``P``.
     """
     o, d, P = _vec(o, mi.Point3f), dr.normalize(_vec(d)), _vec(P, mi.Point3f)
+    R, eta = _float(R), _float(eta)
     t_near, _, hit = intersect(o, d, P, R)
     hit &= t_near > 0                        # camera outside the totem, totem ahead
     # Incidence cosine at D from the chord: cos = sqrt(R^2 - l^2) / R, l the

@@ -149,6 +149,18 @@ def test_snell_coplanarity_and_points_on_sphere(rays):
     np.testing.assert_allclose(got["cos_in"], -np.sum(d_in * N1, 1), atol=1e-6)
 
 
+def test_numpy_inputs_accepted(rays):
+    """numpy arrays (n, 3) and (n,) work in place of Dr.Jit arrays."""
+    a = sphere.totem_rays(rays["o"], rays["d"], rays["P"], rays["R"], rays["n"])
+    b = sphere.totem_rays(vec(rays["o"], mi.Point3f), vec(rays["d"]), vec(rays["P"], mi.Point3f),
+                          mi.Float(rays["R"].astype(np.float32)),
+                          mi.Float(rays["n"].astype(np.float32)))
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(np.array(x), np.array(y))
+    with pytest.raises(ValueError, match="3-vector"):
+        sphere.totem_rays(rays["o"][:, :2], rays["d"], rays["P"], rays["R"], rays["n"])
+
+
 def test_ray_through_centre_is_undeviated():
     P = np.array([[0.1, -0.2, 1.5], [0.0, 0.0, 0.7]])
     d = unit(P)
@@ -238,18 +250,16 @@ def test_invalid_rays_flagged():
 
 
 def _objective(path, w1, w2):
-    """Per-ray scalar: <d_out, w1> + <E, w2> (Dr.Jit or numpy)."""
-    if isinstance(path.E, np.ndarray):
-        return np.sum(path.d_out * w1, 1) + np.sum(path.E * w2, 1)
-    return dr.dot(path.d_out, vec(w1)) + dr.dot(path.E, vec(w2))
+    """Per-ray scalar: <d_out, w1> + <E, w2> + 3 T (Dr.Jit)."""
+    return dr.dot(path.d_out, vec(w1)) + dr.dot(path.E, vec(w2)) + 3 * path.T
 
 
 def test_gradient_wrt_centre_matches_finite_differences(rays):
     rng = np.random.default_rng(5)
     m = 40
     r = {k: v[:m] for k, v in rays.items()}
-    w1, w2 = rng.normal(size=(m, 3)), rng.normal(size=(m, 3)) * 5
-    eps = 2e-3
+    w1, w2 = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
+    eps = 1e-3
 
     def f32(Pn):
         path = sphere.totem_path(vec(r["o"], mi.Point3f), vec(r["d"]), vec(Pn, mi.Point3f),
@@ -259,7 +269,7 @@ def test_gradient_wrt_centre_matches_finite_differences(rays):
 
     def f64(Pn):
         D, d_mid, E, d_out, T = np_totem(r["o"], r["d"], Pn, r["R"], r["n"])
-        return np.sum(d_out * w1, 1) + np.sum(E * w2, 1)
+        return np.sum(d_out * w1, 1) + np.sum(E * w2, 1) + 3 * T
 
     # Reverse mode: the gradient of the sum is the per-ray gradient (one P per ray).
     P = vec(r["P"], mi.Point3f)
@@ -279,11 +289,11 @@ def test_gradient_wrt_centre_matches_finite_differences(rays):
         return g
 
     # Float32 central differences at eps (metres), Richardson-extrapolated: the
-    # O(eps^2) error alone is 5e-3 for a 5 cm totem at eps = 1 mm.
+    # O(eps^2) error alone is 5e-3 for a 5 cm totem at eps = 1 mm (T varies fast).
     g_fd32 = (4 * central(f32, eps / 2) - central(f32, eps)) / 3
     g_fd64 = central(f64, 1e-6)
     scale = np.linalg.norm(g_fd64, axis=1)
-    assert (scale > 1).all()
+    assert (scale > 0.1).all()
     err32 = np.linalg.norm(g_ad - g_fd32, axis=1) / scale
     err64 = np.linalg.norm(g_ad - g_fd64, axis=1) / scale
     assert err32.max() < 1e-3, err32.max()
