@@ -1,0 +1,96 @@
+"""Outline term of the joint fit: each sphere's tangent cone on its mask's outline.
+
+A ray ``d_k`` through the outline of totem ``j``'s mask is tangent to the sphere
+``(P_j, R_j)`` when its angle to the centre equals the cone's half-angle:
+
+    theta_k = angle(d_k, P_j),    alpha_j = asin(R_j / |P_j|),    r_k = theta_k - alpha_j.
+
+The loss is the mean over totems of the mean over their outline rays of ``(s r_k)^2``,
+radians squared (``scale = fx`` makes it pixels squared). Unlike the paper's
+bounding-box IoU (supplementary, "Totem IoU loss"), every outline ray contributes and
+the term is smooth in ``P_j``. It pins the direction of ``P_j`` firmly and its distance
+weakly: moving a sphere sideways by ``dx`` turns the rays by ``dx / |P|``, moving it away
+by ``dz`` shrinks the cone by only ``tan(alpha) dz / |P|``.
+
+The numpy twin is :func:`inverse.pose.tangent_residuals` (the pose initialisation
+minimises the same residual).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inverse import backend, pose
+
+backend.use()
+
+import drjit as dr  # noqa: E402  (after backend.use(), which picks the variant)
+import mitsuba as mi  # noqa: E402
+
+
+def outline_targets(masks, K) -> tuple[np.ndarray, np.ndarray]:
+    """Outline rays of all totem masks, ready for :func:`outline_loss`.
+
+    Returns ``rays`` (m, 3) unit camera-frame directions and ``ray_totem`` (m,) int32,
+    the totem index of each ray. BadInput for an unusable mask (see
+    :func:`inverse.pose.mask_outline_uv`).
+    """
+    masks = np.asarray(masks)
+    if masks.ndim == 2:
+        masks = masks[None]
+    rays = [pose.mask_outline_rays(m, K, j=j) for j, m in enumerate(masks)]
+    ray_totem = np.concatenate([np.full(len(r), j, np.int32) for j, r in enumerate(rays)])
+    return np.concatenate(rays), ray_totem
+
+
+def _as_centers(centers):
+    """Centres as something ``dr.gather(mi.Vector3f, ., idx)`` reads per totem."""
+    if isinstance(centers, (mi.Point3f, mi.Vector3f, mi.Array3f)):
+        return mi.Vector3f(centers)
+    if isinstance(centers, mi.Float):            # flat [x0, y0, z0, x1, ...]
+        return centers
+    arr = np.asarray(centers, dtype=np.float32).reshape(-1, 3)
+    return mi.Vector3f(arr.T)
+
+
+def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
+    """Tangent-cone residual ``theta_k - alpha_j`` of each outline ray, radians (m,).
+
+    Parameters
+    ----------
+    centers : mi.Point3f / mi.Vector3f with n entries, a flat mi.Float of 3n values, or
+        (n, 3) numpy; camera frame, metres. Gradients flow to Dr.Jit inputs.
+    radius : float or (n,) sphere radii, metres
+    rays : (m, 3) numpy or mi.Vector3f, unit camera-frame directions of outline points
+    ray_totem : (m,) ints (numpy or mi.UInt32), the totem of each ray
+    """
+    C = _as_centers(centers)
+    d = rays if isinstance(rays, mi.Vector3f) else \
+        mi.Vector3f(np.asarray(rays, dtype=np.float32).T)
+    idx = ray_totem if isinstance(ray_totem, mi.UInt32) else \
+        mi.UInt32(np.asarray(ray_totem, dtype=np.uint32))
+    R_all = mi.Float(np.atleast_1d(np.asarray(radius, dtype=np.float32)))
+    R = dr.gather(mi.Float, R_all, idx) if dr.width(R_all) > 1 else R_all
+
+    P = dr.gather(mi.Vector3f, C, idx)
+    dist = dr.norm(P)
+    theta = dr.atan2(dr.norm(dr.cross(d, P)), dr.dot(d, P))   # angle(d_k, P_j), stable
+    alpha = dr.asin(R / dist)                                   # tangent cone half-angle
+    return theta - alpha
+
+
+def outline_loss(centers, radius, rays, ray_totem, *, scale: float = 1.0) -> mi.Float:
+    """Mean over totems of the mean squared tangent-cone residual of their outline rays.
+
+    Differentiable in ``centers`` (see :func:`outline_residuals` for the arguments).
+    ``scale`` multiplies the residuals: 1 gives radians squared, ``fx`` about pixels
+    squared. Returns a mi.Float of width 1.
+    """
+    tid = np.asarray(ray_totem).astype(np.int64).ravel()
+    if tid.size == 0:
+        raise ValueError("outline_loss needs at least one outline ray")
+    count = np.bincount(tid)
+    present = np.count_nonzero(count)
+    w = 1.0 / (present * count[tid])                  # each totem weighs the same
+    r = outline_residuals(centers, radius, rays, ray_totem) * scale
+    return dr.sum(mi.Float(w.astype(np.float32)) * dr.square(r))
