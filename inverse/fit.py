@@ -1,0 +1,554 @@
+"""Fit the frustum radiance grid and the totem centres to the photo's totem pixels.
+
+Only the totem pixels are used (never the rest of the photo). The model (see
+:mod:`inverse.integrator`): a totem pixel sees ``T_F * C`` in linear RGB, ``T_F`` the
+Fresnel transmittance of its sphere and ``C`` the grid's radiance along the refracted
+ray. The loss compares in **sRGB** (``srgb(T_F C)`` against the 8-bit pixel), the space
+of the photo and of the recon L1 metric, so dark regions weigh as they will be judged.
+
+Loss = photometric MSE (sRGB)
+     + TV of density and colour (Plenoxels; squared neighbour differences)
+     + distortion (Mip-NeRF 360) on each ray's weights: the scene is opaque surfaces
+     + pose term: ``inverse.outline.outline_loss`` (tangent cone vs mask outline).
+
+Schedule: coarse to fine (the grid is resampled between stages), Adam
+(``mi.ad.Adam``); the totem centres are frozen for the first part of the steps, then
+fitted jointly (unless ``fixed_pose`` or ``true_pose``).
+
+The colour grid is coarse in depth (``colour_depth`` slices): a column of the camera
+view shows one surface, and a colour that may vary freely along the depth would let
+each totem see its own colour along the same column (the streaks along the viewing
+direction an unregularised grid shows).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from inverse import backend, camera
+from inverse.grid import FrustumFrame, frame_for_scene, resample
+from scenes import folder
+from scenes.errors import BadInput
+
+FIT_FILES = ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
+             "totem_views.png", "fit.json", "totem_points.npy")
+
+
+@dataclass
+class FitSettings:
+    """Everything that shapes a fit (stored in ``fit.json``).
+
+    Grid resolutions are (depth slices, rows, columns). ``stages`` lists (fraction of
+    the final image-plane and depth resolution, steps).
+    """
+
+    density_res: tuple = (48, 60, 80)
+    colour_res: tuple = (4, 90, 120)
+    stages: tuple = ((0.25, 100), (0.5, 100), (1.0, 100))
+    n_samples: int = 64
+    lr_density: float = 0.5
+    lr_colour: float = 0.05
+    lr_pose: float = 2e-3            # metres per step (Adam)
+    tv_density: float = 1e-4
+    tv_colour: float = 1e-3
+    distortion: float = 1e-2
+    outline: float = 1.0
+    pose_start: float = 0.5          # fraction of all steps before centres move
+    density_init: float = -4.0       # raw density (softplus -> 0.018 per 1/100)
+    erode_px: int = 1                # mask erosion: drop the blurred rim
+    margin: float = 0.15
+    near_factor: float = 0.5
+    far_factor: float = 6.0
+    render_samples: int = 128
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+
+@dataclass
+class FitResult:
+    """The outcome of a fit (see ``notes/interfaces.md``)."""
+
+    centers: np.ndarray            # (n, 3) fitted centres, camera frame, metres
+    initial: np.ndarray            # (n, 3) initial centres
+    recon: np.ndarray              # (H, W, 3) sRGB [0, 1] float32, camera view from the grid
+    recon_depth: np.ndarray | None  # (H, W) metres, expected depth along camera rays
+    totem_points: np.ndarray       # (m, 3) camera-frame points of highest weight per ray
+    totem_pred: np.ndarray         # (H, W, 3) sRGB fitted colour at totem pixels, 0 elsewhere
+    grid: dict                     # density, colour, frame (np arrays)
+    history: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
+    scene_fingerprint: str = ""
+
+
+# --------------------------------------------------------------------------- helpers
+
+def scene_fingerprint(scene: folder.Scene) -> str:
+    """Hash of the photo, the masks and K: a fit made from another scene differs."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(np.round(scene.image * 255).astype(np.uint8)).tobytes())
+    h.update(np.ascontiguousarray(scene.masks.astype(np.uint8)).tobytes())
+    h.update(np.round(np.asarray(scene.K, np.float64), 6).tobytes())
+    return h.hexdigest()[:16]
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """sRGB [0, 1] -> linear (IEC 61966-2-1)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """Linear -> sRGB [0, 1] (clipped)."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def _dr_linear_to_srgb(x):
+    """Differentiable linear -> sRGB on a Dr.Jit array (clamped to [1e-6, 1])."""
+    import drjit as dr
+    x = dr.clip(x, 1e-6, 1.0)
+    return dr.select(x <= 0.0031308, 12.92 * x, 1.055 * dr.power(x, 1 / 2.4) - 0.055)
+
+
+def _check_scene(scene: folder.Scene):
+    img = np.asarray(scene.image)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise BadInput(f"photo must be (H, W, 3), got shape {img.shape}")
+    if not np.all(np.isfinite(img)):
+        raise BadInput("photo has NaN or infinite values: re-export it as an 8-bit PNG")
+    masks = np.asarray(scene.masks, dtype=bool)
+    if masks.ndim != 3 or masks.shape[1:] != img.shape[:2]:
+        raise BadInput("totem masks must be (n, H, W) and the size of the photo")
+    if masks.shape[0] == 0 or not masks.any():
+        raise BadInput("no totem pixels: the totem masks are empty (white = totem)")
+    if len(np.ravel(scene.radius)) != masks.shape[0] or \
+            len(np.ravel(scene.ior)) != masks.shape[0]:
+        raise BadInput("the key must give one radius and IoR per totem mask")
+
+
+def _totem_pixels(masks: np.ndarray, erode_px: int):
+    """Pixels (u, v) and totem index of every (eroded) totem pixel, each pixel once."""
+    from scipy.ndimage import binary_erosion
+
+    us, vs, js = [], [], []
+    taken = np.zeros(masks.shape[1:], dtype=bool)
+    for j, m in enumerate(masks):
+        m = np.asarray(m, dtype=bool)
+        if erode_px > 0:
+            e = binary_erosion(m, iterations=erode_px)
+            m = e if e.sum() >= 20 else m
+        m = m & ~taken
+        taken |= m
+        v, u = np.nonzero(m)
+        us.append(u)
+        vs.append(v)
+        js.append(np.full(u.size, j))
+    return np.concatenate(us), np.concatenate(vs), np.concatenate(js)
+
+
+class _TV:
+    """Squared-difference total variation of a grid tensor (mean over neighbour pairs)."""
+
+    def __init__(self, shape):
+        import drjit as dr
+        import mitsuba as mi
+
+        D, Hh, Ww, C = shape
+        idx = np.arange(D * Hh * Ww * C).reshape(D, Hh, Ww, C)
+        a = [idx[1:].ravel(), idx[:, 1:].ravel(), idx[:, :, 1:].ravel()]
+        b = [idx[:-1].ravel(), idx[:, :-1].ravel(), idx[:, :, :-1].ravel()]
+        self.a = [mi.UInt32(x.astype(np.uint32)) for x in a if x.size]
+        self.b = [mi.UInt32(x.astype(np.uint32)) for x in b if x.size]
+        self.count = float(max(1, sum(x.size for x in a)))
+        self._dr = dr
+
+    def __call__(self, tensor):
+        import mitsuba as mi
+
+        dr = self._dr
+        x = tensor.array
+        total = mi.Float(0.0)
+        for a, b in zip(self.a, self.b):
+            total += dr.sum(dr.square(dr.gather(mi.Float, x, a) - dr.gather(mi.Float, x, b)))
+        return total / self.count
+
+
+# --------------------------------------------------------------------------- the fit
+
+def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
+              settings: FitSettings | None = None, progress: bool = False,
+              true_pose=None) -> FitResult:
+    """Fit the radiance grid (and the totem centres) to the totem pixels of ``scene``.
+
+    Parameters
+    ----------
+    scene : the scene folder in memory (photo, K, masks, key, optional initial pose).
+    fixed_pose : keep the centres at their initialisation.
+    settings : :class:`FitSettings` (defaults if None).
+    progress : show a tqdm bar with the loss.
+    true_pose : (n, 3) oracle centres (benchmarks): used as given, fixed.
+
+    Returns
+    -------
+    :class:`FitResult`; recon in sRGB [0, 1].
+
+    Raises
+    ------
+    BadInput
+        No totem pixels, a photo with NaN, or a key for which no refracted ray is
+        usable (impossible pose).
+    """
+    backend.use()
+    import drjit as dr
+    import mitsuba as mi
+
+    from inverse import integrator as itg_mod
+
+    t_start = time.perf_counter()
+    settings = settings or FitSettings()
+    _check_scene(scene)
+    W, H = scene.size
+    K = np.asarray(scene.K, dtype=np.float64)
+    n_tot = scene.masks.shape[0]
+    radius = np.broadcast_to(np.asarray(scene.radius, float), (n_tot,)).copy()
+    ior = np.broadcast_to(np.asarray(scene.ior, float), (n_tot,)).copy()
+
+    # ---- initial pose
+    t0 = time.perf_counter()
+    if true_pose is not None:
+        initial = np.asarray(true_pose, dtype=np.float64).reshape(n_tot, 3)
+        fixed_pose = True
+    elif scene.initial_pose is not None:
+        initial = np.asarray(scene.initial_pose, dtype=np.float64)
+    else:
+        from inverse.pose import initial_pose
+        initial = initial_pose(scene.masks, K, radius)
+    t_pose = time.perf_counter() - t0
+
+    # ---- totem pixels and observed colours
+    u, v, jt = _totem_pixels(scene.masks, settings.erode_px)
+    d_cam = camera.pixel_rays(K, u, v).astype(np.float32)
+    observed = np.asarray(scene.image, np.float32)[v, u]          # sRGB
+
+    frame = frame_for_scene(K, (W, H), initial, radius, margin=settings.margin,
+                            near_factor=settings.near_factor, far_factor=settings.far_factor)
+
+    # ---- which rays are usable at the initial pose
+    itg = itg_mod.TotemGridIntegrator(mi.Properties())
+    itg.n_samples = settings.n_samples
+    d0 = np.full(tuple(settings.density_res) + (1,), settings.density_init, np.float32)
+    c0 = np.full(tuple(settings.colour_res) + (3,), 0.2, np.float32)
+    itg.setup(frame, d0[:2, :2, :2], c0[:2, :2, :2], initial, radius, ior)
+    _, valid0, *_ = itg.render_totem_rays(d_cam, jt, n=2)
+    valid0 = np.asarray(valid0, dtype=bool)
+    if valid0.sum() < 20:
+        raise BadInput("no usable refracted rays through the totems with this key: check "
+                       "the radius and IoR in totems.json")
+    u, v, jt, d_cam, observed = u[valid0], v[valid0], jt[valid0], d_cam[valid0], \
+        observed[valid0]
+    n_rays = u.size
+
+    # Initial colour: the mean observed radiance, undoing the Fresnel loss (~0.9).
+    mean_lin = srgb_to_linear(observed).mean(0) / 0.9
+    obs_dr = mi.Color3f(observed[:, 0], observed[:, 1], observed[:, 2])
+
+    # ---- schedule
+    stages = [(float(f), int(s)) for f, s in settings.stages]
+    total_steps = sum(s for _, s in stages)
+    pose_step = int(round(settings.pose_start * total_steps))
+    learn_pose = not fixed_pose
+    outline_term = None
+    if learn_pose and settings.outline > 0:
+        outline_term = _outline_term(scene.masks, K, radius)
+
+    history = {"loss": [], "photo": [], "tv": [], "distortion": [], "pose": [],
+               "stage": []}
+    step_times = []
+    step = 0
+    density = d0
+    colour = np.broadcast_to(mean_lin.astype(np.float32),
+                             tuple(settings.colour_res) + (3,)).copy()
+    centers = initial.copy()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=total_steps, desc="fit", unit="step", leave=False)
+
+    for frac, n_steps in stages:
+        dres = tuple(max(2, int(round(r * frac))) for r in settings.density_res)
+        cres = (settings.colour_res[0],) + tuple(max(2, int(round(r * frac)))
+                                                for r in settings.colour_res[1:])
+        density = resample(density, dres)
+        colour = resample(colour, cres)
+        itg.setup(frame, density, colour, centers, radius, ior)
+        params = mi.traverse(itg)
+        opt = mi.ad.Adam(lr=settings.lr_density)
+        opt["density"] = params["density"]
+        opt["colour"] = params["colour"]
+        opt.set_learning_rate({"density": settings.lr_density, "colour": settings.lr_colour})
+        params.update(opt)
+        tv_d, tv_c = _TV(density.shape), _TV(colour.shape)
+        pose_on = False
+        for _ in range(n_steps):
+            ts = time.perf_counter()
+            if learn_pose and not pose_on and step >= pose_step:
+                opt["centers"] = params["centers"]
+                opt.set_learning_rate({"centers": settings.lr_pose})
+                params.update(opt)
+                pose_on = True
+            L, valid, w, m, *_ = itg.render_totem_rays(d_cam, jt)
+            pred = mi.Color3f(*[_dr_linear_to_srgb(L[i]) for i in range(3)])
+            vmask = dr.select(valid, 1.0, 0.0)
+            diff = pred - obs_dr
+            photo = dr.sum(vmask * (dr.square(diff.x) + dr.square(diff.y)
+                                    + dr.square(diff.z))) / (3.0 * n_rays)
+            tv = settings.tv_density * tv_d(params["density"]) + \
+                settings.tv_colour * tv_c(params["colour"])
+            dist = dr.sum(vmask * itg_mod.distortion(w, m, itg.n_samples)) / n_rays
+            loss = photo + tv + settings.distortion * dist
+            pose_l = mi.Float(0.0)
+            if pose_on and outline_term is not None:
+                pose_l = outline_term(params["centers"])
+                loss = loss + settings.outline * pose_l
+            dr.backward(loss)
+            opt.step()
+            params.update(opt)
+            history["loss"].append(float(loss[0]))
+            history["photo"].append(float(photo[0]))
+            history["tv"].append(float(tv[0]))
+            history["distortion"].append(float(dist[0]))
+            history["pose"].append(float(pose_l[0]))
+            history["stage"].append(frac)
+            step_times.append(time.perf_counter() - ts)
+            step += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(loss=f"{history['loss'][-1]:.4g}")
+        density = np.array(params["density"].numpy())
+        colour = np.array(params["colour"].numpy())
+        if pose_on:
+            centers = itg.center_numpy()
+    if bar is not None:
+        bar.close()
+    centers = itg.center_numpy() if learn_pose else initial.copy()
+
+    # ---- outputs
+    t0 = time.perf_counter()
+    itg.setup(frame, density, colour, centers, radius, ior)
+    recon, depth = render_view(itg, frame, (W, H), n=settings.render_samples)
+    L, valid, w, m, g0, g1 = itg.render_totem_rays(d_cam, jt)
+    pred = linear_to_srgb(np.asarray(L).T)
+    totem_pred = np.zeros((H, W, 3), np.float32)
+    totem_pred[v, u] = pred
+    totem_points = _peak_points(frame, np.asarray(w), np.asarray(m), np.asarray(g0),
+                                np.asarray(g1), itg.n_samples, np.asarray(valid, bool))
+    t_render = time.perf_counter() - t0
+
+    steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
+    timings = {
+        "pose_init_s": t_pose,
+        "first_step_s": step_times[0] if step_times else None,
+        "steady_step_s": steady,
+        "optimise_s": float(np.sum(step_times)),
+        "render_s": t_render,
+        "total_s": time.perf_counter() - t_start,
+        "n_rays": int(n_rays),
+        "n_samples": int(settings.n_samples),
+    }
+    # Compile time: the first step of each stage compiles new kernels.
+    firsts, i = [], 0
+    for _, s in stages:
+        if s:
+            firsts.append(step_times[i])
+        i += s
+    if steady is not None:
+        timings["compile_s_estimate"] = float(sum(max(0.0, f - steady) for f in firsts))
+    grid = {"density": density, "colour": colour, **frame.to_dict(),
+            "n_samples": np.int64(settings.n_samples)}
+    return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
+                     totem_points=totem_points, totem_pred=totem_pred, grid=grid,
+                     history=history, timings=timings, settings=settings.to_dict(),
+                     scene_fingerprint=scene_fingerprint(scene))
+
+
+def _outline_term(masks, K, radius):
+    """The differentiable pose term: engineer P's ``outline_loss`` over mask outlines."""
+    import drjit as dr
+    import mitsuba as mi
+    try:
+        from inverse.outline import outline_loss
+        from inverse.pose import mask_outline_rays
+    except ImportError:
+        return None
+    rays, idx = [], []
+    for j, mk in enumerate(masks):
+        r = mask_outline_rays(mk, K)
+        rays.append(r)
+        idx.append(np.full(len(r), j))
+    rays = np.concatenate(rays).astype(np.float32)
+    idx = np.concatenate(idx)
+    rays_dr = mi.Vector3f(rays[:, 0], rays[:, 1], rays[:, 2])
+    idx_dr = mi.UInt32(idx.astype(np.uint32))
+    R = mi.Float(np.asarray(radius, np.float32))
+    n = len(masks)
+
+    def term(centers_flat):
+        i = dr.arange(mi.UInt32, n)
+        P = mi.Point3f(*[dr.gather(mi.Float, centers_flat, i + a * n) for a in range(3)])
+        return outline_loss(P, R, rays_dr, idx_dr)
+
+    return term
+
+
+def render_view(itg, frame: FrustumFrame, size, *, n: int = 128, rows_per_chunk=None):
+    """The camera view re-rendered from the grid (no totems).
+
+    Returns
+    -------
+    recon : (H, W, 3) float32 sRGB [0, 1].
+    depth : (H, W) float32 metres, the weight-averaged depth along each column.
+    """
+    import drjit as dr
+
+    W, H = size
+    rows_per_chunk = rows_per_chunk or max(1, 2_000_000 // (W * n))
+    recon = np.zeros((H, W, 3), np.float32)
+    depth = np.zeros((H, W), np.float32)
+    inv_near, inv_far = 1.0 / frame.near, 1.0 / frame.far
+    for r0 in range(0, H, rows_per_chunk):
+        r1 = min(H, r0 + rows_per_chunk)
+        vv, uu = np.mgrid[r0:r1, 0:W]
+        s, t = frame.pixel_to_st(uu.ravel(), vv.ravel())
+        with dr.suspend_grad():
+            C, w, m = itg.render_columns(s, t, n=n)
+        C = np.asarray(C).T
+        w = np.asarray(w).reshape(-1, n)
+        m = np.asarray(m).reshape(-1, n)
+        z = 1.0 / (inv_near - m * (inv_near - inv_far))
+        recon[r0:r1] = linear_to_srgb(C).reshape(r1 - r0, W, 3)
+        depth[r0:r1] = ((w * z).sum(1) / np.maximum(w.sum(1), 1e-8)).reshape(r1 - r0, W)
+    return recon, depth
+
+
+def _peak_points(frame, w, m, g0, g1, n, valid):
+    """Camera-frame point of highest weight along each valid totem ray, (m, 3) metres."""
+    w = w.reshape(-1, n)
+    k = np.argmax(w, axis=1)
+    rows = np.arange(w.shape[0])
+    mm = m.reshape(-1, n)[rows, k]
+    a = g0.T.reshape(-1, n, 3)[rows, k]
+    b = g1.T.reshape(-1, n, 3)[rows, k]
+    g = a + mm[:, None] * (b - a)
+    pts = frame.from_unit(g)
+    return pts[valid & np.all(np.isfinite(pts), axis=1)]
+
+
+# --------------------------------------------------------------------------- files
+
+def _totem_views(scene_image, totem_pred, masks) -> np.ndarray:
+    """Observed (top) and fitted (bottom) totem pixels, cropped to the masks' box."""
+    any_m = np.asarray(masks, bool).any(0)
+    v, u = np.nonzero(any_m)
+    pad = 4
+    v0, v1 = max(0, v.min() - pad), min(any_m.shape[0], v.max() + pad + 1)
+    u0, u1 = max(0, u.min() - pad), min(any_m.shape[1], u.max() + pad + 1)
+    obs = np.where(any_m[..., None], scene_image, 0.0)[v0:v1, u0:u1]
+    fit = totem_pred[v0:v1, u0:u1]
+    return np.concatenate([obs, np.ones((2, u1 - u0, 3)), fit], 0)
+
+
+def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) -> None:
+    """Write the fit/ files of the contract (plus ``totem_points.npy``), each atomically.
+
+    ``totem_views.png`` shows observed over fitted totem pixels when ``scene`` is given,
+    else the fitted totem pixels alone.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    folder.write_npy(out / "totem_pose.npy", np.asarray(result.centers, np.float64))
+    folder.write_npy(out / "initial_totem_pose.npy", np.asarray(result.initial, np.float64))
+    folder.write_npy(out / "totem_points.npy", np.asarray(result.totem_points, np.float64))
+    grid = {k: np.asarray(v) for k, v in result.grid.items()}
+    if result.recon_depth is not None:
+        grid["recon_depth"] = np.asarray(result.recon_depth, np.float32)
+    grid["totem_pred"] = np.asarray(result.totem_pred, np.float32)
+    folder.write_npz(out / "grid.npz", **grid)
+    folder.write_image(out / "recon.png", result.recon)
+    if scene is not None:
+        views = _totem_views(scene.image, result.totem_pred, scene.masks)
+    else:
+        mask = np.any(result.totem_pred > 0, axis=2)
+        views = _totem_views(result.totem_pred, result.totem_pred, mask[None])
+    folder.write_image(out / "totem_views.png", views)
+    folder.write_json(out / "fit.json", {
+        "scene_fingerprint": result.scene_fingerprint,
+        "centers": np.asarray(result.centers).tolist(),
+        "initial": np.asarray(result.initial).tolist(),
+        "history": result.history, "timings": result.timings,
+        "settings": result.settings, "versions": backend.describe()})
+
+
+def load_fit(fit_dir) -> FitResult:
+    """Read a fit/ folder written by :func:`write_fit`. BadInput if missing or corrupt."""
+    d = Path(fit_dir)
+    if not d.is_dir():
+        raise BadInput(f"fit folder not found: {d} (run `totems fit` first)")
+    for name in ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
+                 "fit.json", "totem_points.npy"):
+        if not (d / name).is_file():
+            raise BadInput(f"fit folder {d} lacks {name}: run `totems fit` again")
+    try:
+        meta = json.loads((d / "fit.json").read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{d / 'fit.json'} is not valid JSON ({exc})") from None
+    centers = np.asarray(folder.safe_load_npy(d / "totem_pose.npy"), dtype=np.float64)
+    initial = np.asarray(folder.safe_load_npy(d / "initial_totem_pose.npy"), np.float64)
+    points = np.asarray(folder.safe_load_npy(d / "totem_points.npy"), dtype=np.float64)
+    if centers.ndim != 2 or centers.shape[1] != 3 or centers.shape != initial.shape \
+            or not np.all(np.isfinite(centers)):
+        raise BadInput(f"{d}: totem_pose.npy / initial_totem_pose.npy must be (n, 3) finite")
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise BadInput(f"{d}: totem_points.npy must be (m, 3)")
+    try:
+        with np.load(d / "grid.npz", allow_pickle=False) as z:
+            grid = {k: z[k] for k in z.files}
+    except Exception as exc:
+        raise BadInput(f"{d / 'grid.npz'} is unreadable ({exc.__class__.__name__})") from None
+    for k in ("density", "colour"):
+        if k not in grid or grid[k].ndim != 4:
+            raise BadInput(f"{d / 'grid.npz'} lacks a 4-D '{k}' grid")
+    FrustumFrame.from_dict(grid)               # validates the frame
+    recon = folder.read_image(d / "recon.png", what="fit recon.png")
+    depth = grid.pop("recon_depth", None)
+    totem_pred = grid.pop("totem_pred", None)
+    if totem_pred is None:
+        totem_pred = np.zeros_like(recon)
+    return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
+                     totem_points=points, totem_pred=totem_pred, grid=grid,
+                     history=meta.get("history", {}), timings=meta.get("timings", {}),
+                     settings=meta.get("settings", {}),
+                     scene_fingerprint=str(meta.get("scene_fingerprint", "")))
+
+
+def render_grid(grid: dict, size, *, n: int = 128):
+    """Re-render the camera view from a saved grid (``load_fit(...).grid``).
+
+    Returns (recon sRGB (H, W, 3) float32, depth (H, W) metres).
+    """
+    backend.use()
+    import mitsuba as mi
+
+    from inverse.integrator import TotemGridIntegrator
+
+    frame = FrustumFrame.from_dict(grid)
+    itg = TotemGridIntegrator(mi.Properties()).setup(frame, grid["density"], grid["colour"])
+    return render_view(itg, frame, size, n=n)
