@@ -22,8 +22,8 @@ itself and is under-scored; an edit outside the protected region is never seen. 
 grid's patches overlap heavily (on a 150-px crop the vertical stride is 3 px), so a
 40-px edit touches about a third of the patches and widens the MAD: measured on
 320 x 240 renders of the presets with a blurred "recon" (clean view down-sampled 4x / 8x
-and back, standing in for a coarse grid), untouched photos scored 0.8-5.6 / 1.1-9.1 (6 scenes) and
-a 40-px random-colour square 2.4-26.4, so the threshold must be calibrated on real fits.
+and back, standing in for a coarse grid), untouched photos (6 scenes) scored 0.8-5.6 /
+1.1-9.1 and a 40-px random-colour square 2.4-26.4: calibrate on real fits.
 """
 
 from __future__ import annotations
