@@ -20,6 +20,12 @@ Conventions (the same everywhere in this module):
 
 Reflections inside the totem are ignored (the paper does the same); ``T`` is the
 fraction of unpolarised light that crosses both surfaces.
+
+Public functions: :func:`intersect`, :func:`refract` (one surface),
+:func:`refract_in_out` (both), :func:`totem_rays` / :func:`totem_path` (camera rays
+through one given totem per ray), :func:`totem_rays_nearest` (several totems, the first
+one each ray meets), :func:`totem_scene` / :func:`totem_rays_scene` (Mitsuba's
+``ray_intersect`` picks the totem, occluders included; the optics stay analytic).
 """
 
 from __future__ import annotations
