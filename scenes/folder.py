@@ -381,9 +381,14 @@ class Truth:
 
 
 def read_truth(path) -> Truth | None:
-    """Read ``SCENE/truth/``, or None when the scene has none (a real photo)."""
+    """Read ``SCENE/truth/``, or None when the scene has none (a real photo).
+
+    A tampered photo's ``truth/`` holds only the record of the edit (``tamper.json``):
+    it has no scene truth, so None too.
+    """
     t = Path(path) / "truth"
-    if not t.is_dir():
+    if not t.is_dir() or not any((t / f).is_file()
+                                 for f in ("clean.png", "totem_pose.npy", "scene.json")):
         return None
     clean = read_image(t / "clean.png", what="truth/clean.png")
     pose = np.asarray(safe_load_npy(t / "totem_pose.npy"), dtype=float)
