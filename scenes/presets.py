@@ -104,14 +104,14 @@ def _random_rgb(rng, saturation=(0.4, 0.8), value=(0.35, 0.8)) -> list:
 
 def _texture_material(rng, name: str, uv_scale=(1.0, 1.0)) -> dict:
     """A diffuse material textured by ``skimage.data.<name>``; grey ones are tinted."""
-    tint = _random_rgb(rng, (0.3, 0.7), (0.75, 1.0)) if name in GREY_TEXTURES \
+    tint = _random_rgb(rng, (0.25, 0.6), (0.85, 1.0)) if name in GREY_TEXTURES \
         else [1.0, 1.0, 1.0]
     return {"type": "diffuse", "texture": name, "tint": tint,
             "uv_scale": [float(uv_scale[0]), float(uv_scale[1])]}
 
 
-def _object_material(rng) -> dict:
-    if rng.uniform() < 0.6:
+def _object_material(rng, textured: bool) -> dict:
+    if textured:
         name = str(rng.choice(PHOTO_TEXTURES + ("brick", "checkerboard", "coins")))
         return _texture_material(rng, name)
     return {"type": "diffuse", "rgb": _random_rgb(rng)}
@@ -123,6 +123,7 @@ def _floor_objects(rng, R: np.ndarray, floor_y: float, *, x_range, z_range, n_ra
                    first_id: int) -> list:
     """Random boxes, spheres and cylinders standing on the floor, footprints apart."""
     n = int(rng.integers(n_range[0], n_range[1] + 1))
+    textured = rng.permutation(np.arange(n) < int(np.ceil(0.6 * n)))
     placed, objects = [], []
     for _ in range(200):
         if len(objects) == n:
@@ -152,7 +153,8 @@ def _floor_objects(rng, R: np.ndarray, floor_y: float, *, x_range, z_range, n_ra
         objects.append({
             "id": first_id + len(objects), "name": f"{kind}_{len(objects)}", "kind": kind,
             "to_world": (_affine(R, [0, 0, 0]) @ local).tolist(),
-            "material": _object_material(rng), "removable": True})
+            "material": _object_material(rng, bool(textured[len(objects)])),
+            "removable": True})
     return objects
 
 
@@ -177,8 +179,9 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
     textures = [floor_tex, wall_tex[0], wall_tex[1], wall_tex[2], wall_tex[3], wall_tex[4]]
     objects = []
     for i, ((name, c, n, d, w, h), tex) in enumerate(zip(specs, textures)):
-        repeat = max(1.0, round(max(w, h) / 1.6))
-        uv = (repeat, repeat * h / w) if tex in GREY_TEXTURES else (1.0, 1.0)
+        tile = 1.6                  # metres covered by one copy of a grey texture
+        uv = (max(1, round(w / tile)), max(1, round(h / tile))) if tex in GREY_TEXTURES \
+            else (1.0, 1.0)
         to_world = _affine(R, [0, 0, 0]) @ panel(c, n, d, w, h)
         objects.append({"id": i, "name": name, "kind": "rectangle",
                         "to_world": to_world.tolist(),
@@ -186,10 +189,10 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
     n_lights = int(rng.integers(1, 3))
     lights = []
     for j in range(n_lights):
-        x = 0.0 if n_lights == 1 else (-0.6 if j == 0 else 0.6)
+        x = 0.0 if n_lights == 1 else (-0.75 if j == 0 else 0.75)
         z = rng.uniform(1.8, 3.0)
-        w, d = rng.uniform(0.6, 0.9), rng.uniform(0.6, 0.9)
-        power = 7.0 / n_lights / (w * d)
+        w, d = rng.uniform(0.9, 1.3), rng.uniform(0.8, 1.1)
+        power = 16.0 / n_lights / (w * d)
         warm = rng.uniform(0.85, 1.0)
         to_world = _affine(R, [0, 0, 0]) @ panel([x, ceil + 0.01, z], -up, -fwd, w, d)
         lights.append({"name": f"light_{j}", "kind": "rectangle",
