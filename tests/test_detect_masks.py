@@ -1,0 +1,69 @@
+"""scenes/detect_masks: glass-sphere silhouettes found to IoU >= 0.95; none in a wall."""
+
+import numpy as np
+import pytest
+
+from scenes import folder
+from scenes.detect_masks import propose_masks, write_masks
+from scenes.errors import BadInput
+
+
+def _photo(seed, n=3, totems=True, W=320, H=240):
+    """A smooth textured wall with n sphere images: inside each ellipse the wall seen
+    minified and inverted (as through a glass sphere) with a darkening rim. The true
+    mask is the set of pixel centres inside each ellipse (computed independently)."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+
+    def wall(x, y):
+        return np.stack([0.5 + 0.25 * np.sin(x / 11 + 1) * np.cos(y / 17),
+                         0.45 + 0.2 * np.cos((x - y) / 23),
+                         0.4 + 0.2 * np.sin(y / 9 + x / 31)], -1)
+
+    img, masks = wall(u, v), []
+    if totems:
+        for x in np.linspace(50, W - 50, n) + rng.uniform(-10, 10, n):
+            y, r = rng.uniform(120, 190), rng.uniform(16, 26)
+            rho = np.hypot((u - x) / (r * rng.uniform(1.0, 1.08)), (v - y) / r)
+            m = rho < 1
+            inside = wall(x - 3 * (u - x), y - 3 * (v - y)) * (0.85 - 0.4 * rho[..., None] ** 4)
+            img[m] = inside[m]
+            masks.append(m)
+    img = np.clip(img + rng.normal(0, 0.01, img.shape), 0, 1).astype(np.float32)
+    return img, np.array(masks)
+
+
+@pytest.mark.slow
+def test_masks_match_truth_and_go_left_to_right():
+    img, truth = _photo(1, n=4)
+    masks = propose_masks(img, n=4)
+    assert masks.shape == truth.shape
+    iou = (masks & truth).sum((1, 2)) / (masks | truth).sum((1, 2))
+    assert np.all(iou >= 0.95), iou        # index by index: also checks the order
+
+
+def test_wall_without_totem_is_bad_input():
+    img, _ = _photo(2, totems=False)
+    with pytest.raises(BadInput, match="no totem found"):
+        propose_masks(img)
+
+
+def test_write_masks_keeps_hand_drawn(tmp_path):
+    img, truth = _photo(0, n=2)
+    folder.write_image(tmp_path / "image.png", img)
+    hand = np.zeros_like(truth[0])
+    hand[100:130, 20:60] = True                          # a person's mask: used as given
+    folder.write_image(tmp_path / "totem_masks" / "mine.png", hand)
+    out = write_masks(tmp_path)
+    assert out["proposed"] is False and out["n"] == 1
+    assert sorted(p.name for p in (tmp_path / "totem_masks").iterdir()) == ["mine.png"]
+    check = folder.read_image(tmp_path / "totem_masks_check.png")
+    assert np.abs(check - folder.read_image(tmp_path / "image.png")).max() > 0.3  # outline
+
+    other = tmp_path / "other"
+    other.mkdir()
+    folder.write_image(other / "image.png", img)
+    out = write_masks(other, truth)                      # given masks, none on disk
+    assert out["proposed"] is True
+    back = np.stack([folder.read_mask(p) for p in out["masks"]])
+    assert np.array_equal(back, truth)
