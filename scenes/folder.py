@@ -267,17 +267,23 @@ def read_key(path, n_totems: int) -> tuple[np.ndarray, np.ndarray]:
     for e in entries:
         if not isinstance(e, dict) or "radius" not in e or "ior" not in e:
             raise BadInput(f"{path} must give 'radius' (m) and 'ior' for each totem")
-        try:
-            r, n = float(e["radius"]), float(e["ior"])
-        except (TypeError, ValueError):
-            raise BadInput(f"{path}: radius and ior must be numbers") from None
-        if not (np.isfinite(r) and 0.0 < r < 10.0):
-            raise BadInput(f"{path}: radius must be a positive length in metres, got {r}")
-        if not (np.isfinite(n) and 1.0 < n < 4.0):
-            raise BadInput(f"{path}: ior must lie in (1, 4), got {n}")
+        r, n = _check_key(e["radius"], e["ior"], where=str(path))
         radius.append(r)
         ior.append(n)
     return np.array(radius), np.array(ior)
+
+
+def _check_key(radius, ior, *, where: str) -> tuple[float, float]:
+    """One totem's key as floats: radius in (0, 10) metres, ior in (1, 4)."""
+    try:
+        r, n = float(radius), float(ior)
+    except (TypeError, ValueError):
+        raise BadInput(f"{where}: radius and ior must be numbers") from None
+    if not (np.isfinite(r) and 0.0 < r < 10.0):
+        raise BadInput(f"{where}: radius must be a positive length in metres, got {r}")
+    if not (np.isfinite(n) and 1.0 < n < 4.0):
+        raise BadInput(f"{where}: ior must lie in (1, 4), got {n}")
+    return r, n
 
 
 def key_fingerprint(radius, ior) -> str:
@@ -324,16 +330,22 @@ class Scene:
         return self.masks.shape[0]
 
 
-def find_calib(path: Path) -> Path:
-    """``SCENE/calib.npy``, or ``SCENE/../calib.npy`` (shared by a data set)."""
-    for p in (path / "calib.npy", path.parent / "calib.npy"):
-        if p.is_file():
-            return p
-    raise BadInput(f"no calib.npy in {path} or its parent folder")
+def find_calib(path: Path, levels: int = 2) -> Path:
+    """``SCENE/calib.npy``, or one in the ``levels`` folders above (shared by a data set:
+    the NeRF path keeps ``data-compiled/calib.npy`` two levels above each case)."""
+    path = Path(path).resolve()
+    for p in [path, *path.parents][:levels + 1]:
+        if (p / "calib.npy").is_file():
+            return p / "calib.npy"
+    raise BadInput(f"no calib.npy in {path} or the {levels} folders above it")
 
 
-def read_scene(path) -> Scene:
-    """Read a scene folder and check that its parts agree."""
+def read_scene(path, *, default_key: tuple[float, float] | None = None) -> Scene:
+    """Read a scene folder and check that its parts agree.
+
+    ``default_key`` (radius m, ior) is used when the folder has no ``totems.json``
+    (the NeRF path's data set keeps the key in its configs); otherwise it is required.
+    """
     path = Path(path)
     if not path.is_dir():
         raise BadInput(f"scene folder not found: {path}")
@@ -357,7 +369,11 @@ def read_scene(path) -> Scene:
         masks.append(m)
     order = np.argsort([np.nonzero(m)[1].mean() for m in masks], kind="stable")
     masks = np.stack([masks[i] for i in order])
-    radius, ior = read_key(path / "totems.json", len(masks))
+    if default_key is not None and not (path / "totems.json").is_file():
+        radius, ior = _check_key(*default_key, where="the key")
+        radius, ior = np.full(len(masks), radius), np.full(len(masks), ior)
+    else:
+        radius, ior = read_key(path / "totems.json", len(masks))
     initial = None
     if (path / "initial_totem_pose.npy").is_file():
         initial = np.asarray(safe_load_npy(path / "initial_totem_pose.npy"), dtype=float)

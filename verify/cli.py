@@ -33,6 +33,14 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _size_any(text: str) -> tuple[int, int]:
+    try:
+        a, b = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected COLSxROWS, e.g. 9x6, got {text!r}")
+    return a, b
+
+
 def _region(text: str) -> tuple[int, int, int, int]:
     try:
         x, y, w, h = (int(v) for v in text.split(","))
@@ -60,8 +68,9 @@ def cmd_scene_make(args) -> dict:
     from scenes.make import make_scene
 
     t0 = time.perf_counter()
+    options = {"spp": args.spp} if args.spp else {}
     out = make_scene(args.out, preset=args.preset, seed=args.seed, size=args.size,
-                     n_totems=args.totems, spp=args.spp, progress=_progress(args))
+                     n_totems=args.totems, progress=_progress(args), **options)
     return {"scene": str(out), "preset": args.preset, "seed": args.seed,
             "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -159,6 +168,54 @@ def cmd_bench(args) -> dict:
             "failed": len(bench["summary"]["failed"]), "wall_s": bench["wall_s"]}
 
 
+def cmd_calib(args) -> dict:
+    from scenes.calibrate import calibrate, write_calib
+
+    calib = calibrate(args.images, board=args.board, square=args.square, alpha=args.alpha)
+    write_calib(calib, args.out)
+    return {"calib": str(args.out), "rms_px": float(calib["rms"]),
+            "used": len(calib["used"]), "images": len(args.images),
+            "mtx": calib["mtx"].tolist()}
+
+
+def cmd_ingest(args) -> dict:
+    from scenes.ingest import ingest
+
+    out = ingest(args.photo, args.calib, args.key, args.out, masks_dir=args.masks)
+    return {"scene": str(out)}
+
+
+def cmd_masks(args) -> dict:
+    from scenes.detect_masks import write_masks
+
+    return write_masks(args.scene, n=args.n)
+
+
+def cmd_crosscheck(args) -> dict:
+    import numpy as np
+
+    from inverse.fit import load_fit
+    from scenes.folder import read_mask
+    from scenes.nerf_layout import read_nerf_case
+    from verify.crosscheck import crosscheck, read_nerf_log, write_crosscheck
+
+    scene = read_nerf_case(args.scene)
+    nerf = read_nerf_log(args.nerf)
+    out = _out_dir(args)
+    if (out / "fit" / "fit.json").is_file():
+        fit = load_fit(out / "fit")
+    else:
+        fit, _ = _fit(args, scene)
+        _verify(args, scene, fit)
+    heat_file, protect_file = out / "verify/L1/heatmap.npy", out / "verify/protect_mask.png"
+    heat = np.load(heat_file) if heat_file.is_file() else None
+    protect = read_mask(protect_file) if protect_file.is_file() else None
+    result = crosscheck(scene, fit, heat, protect, nerf)
+    write_crosscheck(result, out / "crosscheck")
+    summary = {k: v for k, v in result.items() if not k.startswith("_")}
+    return {**summary, "crosscheck": str(out / "crosscheck")}
+
+
 def _print_summary(verb: str, summary: dict) -> None:
     if "verdict" in summary:
         m = summary.get("metrics", {})
@@ -168,7 +225,8 @@ def _print_summary(verb: str, summary: dict) -> None:
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
     else:
-        where = summary.get("scene") or summary.get("fit") or summary.get("bench") or ""
+        where = next((summary[k] for k in ("scene", "fit", "bench", "calib", "crosscheck",
+                                           "check") if k in summary), "")
         print(f"{verb}: wrote {where}")
 
 
@@ -237,6 +295,33 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--jobs", type=_positive(int), default=1, help="scenes run at once")
     v.add_argument("--no-table1", action="store_true",
                    help="skip the initial-pose and oracle-pose fits of untouched scenes")
+
+    v = verb("calib", cmd_calib, "camera calibration from checkerboard photos")
+    v.add_argument("images", nargs="+", help="photos of a printed checkerboard")
+    v.add_argument("--board", type=_size_any, required=True,
+                   help="inner corners as COLSxROWS, e.g. 9x6")
+    v.add_argument("--square", type=_positive(float), required=True,
+                   help="side of one square, metres")
+    v.add_argument("--alpha", type=float, default=0.0,
+                   help="0 keeps only valid pixels after undistortion, 1 keeps all")
+    v.add_argument("--out", default="calib.npy", help="output (default calib.npy)")
+
+    v = verb("ingest", cmd_ingest, "a camera photo (undistorted) to a scene folder")
+    v.add_argument("photo")
+    v.add_argument("--calib", required=True, help="calib.npy from `totems calib`")
+    v.add_argument("--key", required=True, help="totems.json: radius (m) and ior")
+    v.add_argument("--masks", default=None, help="totem masks drawn on the raw photo")
+    v.add_argument("out", help="new scene folder")
+
+    v = verb("masks", cmd_masks, "propose totem_masks/ where the folder has none, and a "
+             "picture to check them")
+    v.add_argument("scene")
+    v.add_argument("--n", type=_positive(int), default=None, help="number of totems")
+
+    v = verb("crosscheck", cmd_crosscheck, "our fit beside a NeRF-path run of the scene")
+    v.add_argument("scene")
+    v.add_argument("--nerf", required=True, help="NeRF-path experiment (log) folder")
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
     return p
 
 

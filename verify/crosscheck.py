@@ -113,8 +113,7 @@ def _resize(a: np.ndarray, size: tuple[int, int], nearest: bool = False) -> np.n
 
 def _roi(scene) -> list[int] | None:
     try:
-        from scenes.nerf_layout import find_nerf_calib
-        roi = folder.read_calib(find_nerf_calib(scene.path)).get("roi")
+        roi = folder.read_calib(folder.find_calib(scene.path)).get("roi")
     except BadInput:
         return None
     return None if roi is None else [int(v) for v in np.ravel(roi)[:4]]
