@@ -104,6 +104,72 @@ def inpaint(image, mask, *, method: str = "telea", radius: float = 5.0):
     return out, mask.copy()
 
 
+def clone_fill(image, mask, *, avoid=None, feather_px: float = 3.0):
+    """Fill ``mask`` with texture copied from one offset of the image (a clone stamp),
+    its seam blended into an inpainted fill: content-aware fill in its simplest form.
+
+    The offset is chosen among sideways moves past the hole's box (along a row, a
+    floor or a wall facing the camera keeps its depth, so texture keeps its scale)
+    as the one whose copy of the hole's surrounding ring best matches the ring
+    (mean absolute difference), with the copied pixels inside the image and at most
+    15% of them in ``mask`` or ``avoid`` (those get the inpainted fill). Falls back
+    to :func:`inpaint` when no offset fits.
+
+    Parameters
+    ----------
+    image : (H, W, 3) uint8 sRGB.
+    mask : (H, W) bool, pixels to replace.
+    avoid : optional (H, W) bool, pixels never copied from (e.g. totems).
+    feather_px : depth (pixels) over which the clone fades in from the hole's edge.
+
+    Returns
+    -------
+    out : (H, W, 3) uint8 equal to ``image`` outside ``mask``; footprint : ``mask``;
+    offset : (dx, dy) used, or None for the inpainting fallback.
+    """
+    image = _check_image(image)
+    mask = np.asarray(mask, bool)
+    H, W = mask.shape
+    bad = mask if avoid is None else mask | np.asarray(avoid, bool)
+    # the smooth fill draws on the allowed surroundings only, never on ``avoid``
+    smooth = np.where(mask[..., None], inpaint(image, bad)[0], image)
+    if not mask.any():
+        return smooth, mask.copy(), None
+    ring = ndi.binary_dilation(mask, iterations=3) & ~bad
+    ys, xs = np.nonzero(mask)
+    w = xs.max() - xs.min() + 1
+    offsets = [(s * (w + k), 0) for s in (-1, 1)
+               for k in (2, 6, 12, 24, 48, w // 2, w, 2 * w)]
+    best, best_cost = None, np.inf
+    ry, rx = np.nonzero(ring)
+    for dx, dy in offsets:
+        sy, sx = ys + dy, xs + dx
+        if sy.min() < 0 or sx.min() < 0 or sy.max() >= H or sx.max() >= W:
+            continue
+        if bad[sy, sx].mean() > 0.15:          # mostly allowed pixels to copy
+            continue
+        ok = (ry + dy >= 0) & (ry + dy < H) & (rx + dx >= 0) & (rx + dx < W)
+        if not ok.any():
+            continue
+        cost = np.abs(image[ry[ok] + dy, rx[ok] + dx].astype(np.int16)
+                      - image[ry[ok], rx[ok]]).mean()
+        if cost < best_cost:
+            best, best_cost = (dx, dy), cost
+    if best is None:
+        return smooth, mask.copy(), None
+    dx, dy = best
+    clone = image.copy()
+    my, mx = np.nonzero(mask)
+    clone[my, mx] = image[my + dy, mx + dx]
+    usable = mask.copy()                       # where the copied pixel is allowed
+    usable[my, mx] = ~bad[my + dy, mx + dx]
+    depth = ndi.distance_transform_edt(usable)
+    a = np.clip(depth / max(feather_px, 1e-6), 0.0, 1.0)[..., None]
+    blend = np.rint(a * clone + (1.0 - a) * smooth).astype(np.uint8)
+    out = np.where(mask[..., None], blend, image)
+    return out, mask.copy(), (int(dx), int(dy))
+
+
 def shift_mask(mask, dx: int, dy: int):
     """``mask`` translated by (dx, dy) pixels (right, down), zero-filled at the edges."""
     mask = np.asarray(mask, bool)
@@ -116,7 +182,7 @@ def shift_mask(mask, dx: int, dy: int):
     return out
 
 
-def move_pixels(image, mask, dx: int, dy: int, *, within=None, method: str = "telea"):
+def move_pixels(image, mask, dx: int, dy: int, *, within=None, method: str = "clone"):
     """Cut the pixels of ``mask``, fill the hole, paste them back (dx, dy) pixels away.
 
     The forger's "move" tool: the object's own pixels are copied unchanged, the hole it
@@ -129,7 +195,8 @@ def move_pixels(image, mask, dx: int, dy: int, *, within=None, method: str = "te
     dx, dy : integer shift in pixels (right, down).
     within : optional (H, W) bool; pixels outside it are never written (e.g. to keep
         an edit inside one totem's view).
-    method : inpainting method, see :func:`inpaint`.
+    method : hole fill: "clone" (:func:`clone_fill`, copying only from ``within``) or
+        an inpainting method of :func:`inpaint`.
 
     Returns
     -------
@@ -138,7 +205,10 @@ def move_pixels(image, mask, dx: int, dy: int, *, within=None, method: str = "te
     image = _check_image(image)
     mask = np.asarray(mask, bool)
     allowed = np.ones(mask.shape, bool) if within is None else np.asarray(within, bool)
-    filled, _ = inpaint(image, mask & allowed, method=method)
+    if method == "clone":
+        filled, _, _ = clone_fill(image, mask & allowed, avoid=~allowed)
+    else:
+        filled, _ = inpaint(image, mask & allowed, method=method)
     src = mask
     dst = shift_mask(mask, dx, dy)
     ys, xs = np.nonzero(dst)

@@ -10,8 +10,9 @@ Kinds (the totems paper, Sec. 5 "Image manipulations", and its supplementary):
 ``color``    randomly coloured rectangles of several sizes pasted above the totems.
 ``splice``   a person cut from another photograph (scikit-image's ``astronaut``) pasted
              with a soft edge.
-``inpaint``  an object of the scene removed and its footprint filled by OpenCV
-             inpainting (the stand-in for Photoshop's content-aware fill).
+``inpaint``  an object of the scene removed and its footprint filled by a clone of
+             nearby texture blended into OpenCV inpainting (the stand-in for
+             Photoshop's content-aware fill).
 ``shift``    the reference shift: an object moved in the camera view and, by 2D edits,
              in every totem view to where the same reference point appears there.
 ``remove``   the perfect forger: the camera view re-rendered without an object, the
@@ -197,8 +198,11 @@ def edit_color(src: Source, rng) -> Edit:
     area = src.region if src.region is not None else target_zone(src.totems)
     x0, y0, w0, h0 = _bbox(area)
     n = int(rng.integers(2, 5))
-    scale = np.sqrt(float(area.sum()) if src.region is not None else float(H * W))
-    sizes = np.sort(rng.uniform(0.05, 0.14, n))[::-1] * scale
+    # Sides of 5-14% of the image's scale (each patch 0.25-2% of it), or 20-50% of
+    # a region's.
+    lo, hi, scale = (0.2, 0.5, np.sqrt(float(area.sum()))) if src.region is not None \
+        else (0.05, 0.14, np.sqrt(float(H * W)))
+    sizes = np.sort(rng.uniform(lo, hi, n))[::-1] * scale
     boxes, colors = [], []
     for s in sizes:
         aspect = rng.uniform(0.6, 1.6)
@@ -247,27 +251,34 @@ def edit_splice(src: Source, rng) -> Edit:
 
 
 def edit_inpaint(src: Source, rng) -> Edit:
-    """An object removed and filled by inpainting (content-aware fill's stand-in).
+    """An object removed and its place filled from nearby texture (content-aware
+    fill's stand-in: :func:`edits2d.clone_fill`).
 
     With ``truth/scene.json`` and no region, the object is a removable one of the
     scene and the fill covers its footprint in the camera view; otherwise the region.
     """
     H, W = src.shape
-    method = str(rng.choice(["telea", "ns"]))
-    record = {"method": method}
+    record = {}
+    avoid = src.totems
     if src.region is not None:
         fill = src.region
     elif src.truth is not None and src.truth.scene.get("objects"):
-        obj, footprint = _pick_object(src, rng)
+        from scenes import render
+        ids = render.shape_ids(src.truth.scene, totems=True)
+        obj, footprint = _pick_object(src, rng, ids=ids)
         grow = max(1, round(0.004 * W))
         fill = _dilate(footprint, grow) & ~src.totems
+        # texture is copied from the room, not from the other objects
+        movable = [o["id"] for o in src.truth.scene["objects"] if o.get("removable")]
+        avoid = avoid | _dilate(np.isin(ids, movable), grow)
         record["object"] = {"id": obj["id"], "name": obj.get("name")}
     else:
         raise BadInput("inpaint on a photo without truth/scene.json needs --region "
                        "x,y,w,h or --region-mask FILE (the thing to remove)")
-    radius = max(3.0, 0.008 * W)
-    image, mask = edits2d.inpaint(src.image, fill, method=method, radius=radius)
-    record["radius_px"] = radius
+    image, mask, offset = edits2d.clone_fill(src.image, fill, avoid=avoid & ~fill,
+                                             feather_px=max(2.0, 0.005 * W))
+    record["method"] = "clone+telea" if offset else "telea"
+    record["clone_offset_px"] = offset
     return Edit(image, mask, record)
 
 

@@ -35,12 +35,11 @@ STRONG_DIFF = 16.0      # 8-bit levels in one pixel: a change whatever its size
 def render_settings(desc: dict) -> dict:
     """Sampler settings of the source image: ``{"spp": int, "seed": int}``.
 
-    ``make_scene`` records them in the description (``desc["render"]``); a render with
-    the same settings repeats the source's noise wherever the change does not reach.
+    ``make_scene`` records them in ``truth/scene.json`` (``spp``, ``sampler_seed``); a
+    render with the same settings repeats the source's noise wherever the change does
+    not reach.
     """
-    r = desc.get("render") or {}
-    return {"spp": int(r.get("spp", desc.get("spp", 64))),
-            "seed": int(r.get("seed", desc.get("render_seed", 0)))}
+    return {"spp": int(desc.get("spp", 64)), "seed": int(desc.get("sampler_seed", 0))}
 
 
 def render8(desc: dict, **kw) -> np.ndarray:

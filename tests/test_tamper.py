@@ -36,21 +36,10 @@ def folder_hash(path: Path) -> str:
 
 
 def make_synthetic(out, seed=1, size=SIZE):
-    """A rendered box scene with truth/ (make_scene when there, else the same by hand)."""
-    try:
-        from scenes.make import make_scene
-    except ImportError:
-        make_scene = None
-    if make_scene is not None:
-        return make_scene(out, preset="box", seed=seed, size=size, spp=SPP)
-    from scenes import presets, render
-    desc = presets.describe("box", seed, size=size)
-    desc["render"] = {"spp": SPP, "seed": 0}
-    return folder.write_scene(
-        out, image=render.render(desc, spp=SPP, seed=0), K=np.array(desc["K"]),
-        masks=render.totem_masks(desc), radius=0.1, ior=1.52,
-        truth=folder.Truth(render.render(desc, spp=SPP, seed=0, totems=False),
-                           np.array([t["center"] for t in desc["totems"]]), desc))
+    """A rendered box scene with truth/."""
+    from scenes.make import make_scene
+
+    return make_scene(out, preset="box", seed=seed, size=size, spp=SPP)
 
 
 def make_photo(out):
