@@ -262,7 +262,10 @@ def edit_shift(src: Source, rng) -> Edit:
     without = render8(desc, spp=rs["spp"], seed=rs["seed"], exclude_ids=[obj["id"]])
     moved = render8(_moved(desc, obj["id"], delta), spp=rs["spp"], seed=rs["seed"])
     min_px = max(4, int(2e-4 * H * W))
-    old_all = visible_change(base, without, min_px=min_px)
+    # The object is a few dozen pixels in a totem view: keep small changes there.
+    tot = src.totems
+    old_all = np.where(tot, visible_change(base, without, min_px=2),
+                       visible_change(base, without, min_px=min_px))
     new_all = visible_change(moved, without, min_px=2)
     # Camera view: object and shadow moved by the projected shift, hole inpainted.
     cam_old = (old_all | seen) & ~src.totems
