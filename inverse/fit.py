@@ -49,18 +49,18 @@ class FitSettings:
     """
 
     density_res: tuple = (48, 60, 80)
-    colour_res: tuple = (4, 90, 120)
-    stages: tuple = ((0.25, 100), (0.5, 100), (1.0, 100))
+    colour_res: tuple = (1, 120, 160)
+    stages: tuple = ((0.5, 100), (1.0, 100))
     n_samples: int = 64
-    lr_density: float = 0.5
-    lr_colour: float = 0.05
-    lr_pose: float = 2e-3            # metres per step (Adam)
-    tv_density: float = 1e-4
-    tv_colour: float = 1e-3
+    lr_density: float = 0.1
+    lr_colour: float = 0.02
+    lr_pose: float = 2e-4            # metres per step (Adam)
+    tv_density: float = 0.01
+    tv_colour: float = 3.0
     distortion: float = 1e-2
-    outline: float = 1.0
+    outline: float = 1e-3            # per squared pixel of outline residual
     pose_start: float = 0.5          # fraction of all steps before centres move
-    density_init: float = -4.0       # raw density (softplus -> 0.018 per 1/100)
+    density_init: float = -7.0       # raw density (softplus -> 9e-4 per 1/100)
     erode_px: int = 1                # mask erosion: drop the blurred rim
     margin: float = 0.15
     near_factor: float = 0.5
@@ -400,11 +400,12 @@ def _outline_term(masks, K, radius):
     idx_dr = mi.UInt32(idx.astype(np.uint32))
     R = mi.Float(np.asarray(radius, np.float32))
     n = len(masks)
+    fx = float(K[0, 0])
 
     def term(centers_flat):
         i = dr.arange(mi.UInt32, n)
         P = mi.Point3f(*[dr.gather(mi.Float, centers_flat, i + a * n) for a in range(3)])
-        return outline_loss(P, R, rays_dr, idx_dr)
+        return outline_loss(P, R, rays_dr, idx_dr, scale=fx)
 
     return term
 

@@ -12,15 +12,16 @@ renderer (NeRF's quadrature) over the grid of :mod:`inverse.grid`:
 A camera ray through a totem pixel is first refracted into and out of its glass
 sphere (:func:`inverse.sphere.totem_rays`: Snell at both surfaces, weighted by the
 Fresnel transmittance ``T_F``; reflections ignored), so the pixel's linear radiance
-is ``T_F * C``. Rays that graze the sphere or leave the grid's frustum sideways are
-dropped (``valid`` False).
+is ``T_F * C``. Rays that graze the sphere are dropped (``valid`` False); a ray is
+followed until it leaves the grid's frustum (far or near plane, or a side), where the
+grid's colour is an opaque backdrop.
 
 All samples of all rays are one flat Dr.Jit array (ray ``i`` owns lanes
 ``i*n .. i*n + n-1``): the transmittance is an exclusive ``dr.block_prefix_sum`` and the
 compositing a ``dr.block_sum`` over blocks of ``n``, so one kernel does a whole batch
-and reverse-mode AD stays a handful of vector operations. Rays are recomputed per
-lane (no gather of differentiable per-ray data, hence no scatter-add contention in
-the backward pass); totem centres enter by a ``dr.select`` chain over the few
+and reverse-mode AD stays a handful of vector operations. Refraction runs once per
+ray and its segment is spread to the ray's lanes by ``dr.repeat`` (whose adjoint is a
+block sum: no scatter-add contention in the backward pass); totem centres enter by a ``dr.select`` chain over the few
 totems, whose adjoint is a horizontal sum.
 
 Samples are evenly spaced in the grid's unit coordinates (inverse depth in ``r``),
@@ -88,35 +89,48 @@ class FrameConstants:
         return mi.Point3f(s, t, r)
 
 
-def ray_segment(fc: FrameConstants, o, d, tol: float = 1e-3):
+def ray_segment(fc: FrameConstants, o, d):
     """The part of the rays ``o + t d`` (t >= 0) inside the grid, in unit coordinates.
 
-    A ray moving away from the camera (``d_z > 0``) ends on the far plane, one moving
-    towards it ends on the near plane; it starts at ``o`` (or the near plane if ``o``
-    is nearer). Because the frustum is convex, the segment is inside the grid when
-    both ends are; rays leaving it through a side are flagged invalid.
+    A ray moving away from the camera (``d_z > 0``) is followed to the far plane, one
+    moving towards it to the near plane; the segment is then clipped to the unit cube
+    (the frustum: the map to grid coordinates is projective, so the clipped segment is
+    exactly the part of the ray inside the frustum). Where it ends (far plane, near
+    plane or a side) the last sample is an opaque backdrop with the grid's colour there.
 
     Returns
     -------
     g0, g1 : mi.Point3f
         Unit coordinates of the start and end.
     valid : mi.Bool
+        The ray starts in front of the camera and crosses the grid.
     """
-    eps = 1e-6
+    eps = 1e-4
     dz = dr.select(dr.abs(d.z) > eps, d.z, eps)
-    t0 = dr.maximum(0.0, dr.select(d.z > 0, (fc.near - o.z) / dz, 0.0))
-    t1 = dr.select(d.z > 0, (fc.far - o.z) / dz, (fc.near - o.z) / dz)
-    p0 = o + t0 * d
-    p1 = o + t1 * d
-    # Put the end exactly on its plane (no round-off in r).
-    p1 = mi.Point3f(p1.x, p1.y, dr.select(d.z > 0, fc.far, fc.near))
-    g0, g1 = fc.unit(p0), fc.unit(p1)
-    inside = mi.Bool(True)
-    for g in (g0, g1):
-        for c in (g.x, g.y, g.z):
-            inside &= (c >= -tol) & (c <= 1.0 + tol)
-    valid = (dr.abs(d.z) > eps) & (t1 > t0) & (o.z > 0) & inside
-    return g0, g1, valid
+    t_end = dr.select(d.z > eps, (fc.far - o.z) / dz,
+                      dr.select(d.z < -eps, (fc.near - o.z) / dz, 1e3))
+    t_end = dr.maximum(t_end, 0.0)
+    t_start = dr.select((o.z < fc.near) & (d.z > eps), (fc.near - o.z) / dz, 0.0)
+    p0 = o + t_start * d
+    p1 = o + t_end * d
+    p0 = mi.Point3f(p0.x, p0.y, dr.maximum(p0.z, fc.near))
+    p1 = mi.Point3f(p1.x, p1.y, dr.clip(p1.z, fc.near, fc.far))
+    a, b = fc.unit(p0), fc.unit(p1)
+    # Slab clipping of a -> b against [0, 1]^3.
+    lo, hi = mi.Float(0.0), mi.Float(1.0)
+    for ai, bi in ((a.x, b.x), (a.y, b.y), (a.z, b.z)):
+        di = bi - ai
+        di_s = dr.select(dr.abs(di) > 1e-9, di, 1e-9)
+        l0, l1 = (0.0 - ai) / di_s, (1.0 - ai) / di_s
+        flat = dr.abs(di) <= 1e-9
+        lo = dr.select(flat, lo, dr.maximum(lo, dr.minimum(l0, l1)))
+        hi = dr.select(flat, hi, dr.minimum(hi, dr.maximum(l0, l1)))
+        inside_flat = (ai >= 0.0) & (ai <= 1.0)
+        hi = dr.select(flat & ~inside_flat, -1.0, hi)
+    valid = (o.z > 0) & (hi > lo + 1e-4)
+    g0 = a + lo * (b - a)
+    g1 = a + hi * (b - a)
+    return mi.Point3f(g0), mi.Point3f(g1), valid
 
 
 def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
@@ -150,10 +164,12 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     delta = dr.norm(seg) / n
     sigma = softplus(density.eval(p)[0])
     tau = sigma * delta
+    c = mi.Color3f(colour.eval(p))
+    dr.eval(tau, c, m)        # one kernel for the lookups, reused by every reduction
     T = dr.exp(-dr.block_prefix_sum(tau, n, exclusive=True))
     alpha = dr.select(k == n - 1, 1.0, 1.0 - dr.exp(-tau))   # opaque backdrop
     w = T * alpha
-    c = mi.Color3f(colour.eval(p))
+    dr.eval(w)
     C = mi.Color3f(dr.block_sum(w * c.x, n), dr.block_sum(w * c.y, n),
                    dr.block_sum(w * c.z, n))
     return C, w, m
@@ -270,19 +286,21 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         g0, g1 : per-lane segment ends (unit coordinates).
         """
         n = n or self.n_samples
-        d_cam = np.repeat(np.asarray(d_cam, np.float32), n, axis=0)
+        d_cam = np.asarray(d_cam, np.float32)
         d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
-        idx = mi.UInt32(np.repeat(np.asarray(totem_index, np.uint32), n))
+        idx = mi.UInt32(np.asarray(totem_index, np.uint32))
         P = select_center(self.center_array(), idx)
         R = dr.gather(mi.Float, self.radius, idx)
         eta = dr.gather(mi.Float, self.ior, idx)
         o_out, d_out, T_F, ok = totem_rays(mi.Point3f(0.0), d, P, R, eta)
         g0, g1, inside = ray_segment(self.fc, o_out, d_out)
-        C, w, m = march(self.density, self.colour, g0, g1, n, jitter=jitter)
-        lane_valid = dr.select(ok & inside, 1.0, 0.0)
-        valid = dr.block_sum(lane_valid, n) > n - 0.5
-        T_ray = dr.block_sum(T_F, n) / n
-        return C * T_ray, valid, w, m, g0, g1
+        valid = ok & inside
+        dr.eval(g0, g1, T_F, valid)
+        # Per ray -> per lane: dr.repeat's adjoint is a block sum (no atomics).
+        g0_l = mi.Point3f(*[dr.repeat(g0[a], n) for a in range(3)])
+        g1_l = mi.Point3f(*[dr.repeat(g1[a], n) for a in range(3)])
+        C, w, m = march(self.density, self.colour, g0_l, g1_l, n, jitter=jitter)
+        return C * T_F, valid, w, m, g0_l, g1_l
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         """One camera ray per lane (camera frame = world frame): refracted through the

@@ -1,0 +1,253 @@
+"""Tests of inverse/grid, inverse/integrator and inverse/fit: the frustum frame, the
+gradients of the rendered totem colour (finite differences), the fit on a small
+rendered scene, the fit/ files round trip and bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from inverse import backend, camera
+from inverse.grid import FrustumFrame, frame_for_scene, resample
+from scenes.errors import BadInput
+
+backend.use()
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+W, H = 80, 60
+K = camera.intrinsics(W, H, 60.0)
+CENTERS = np.array([[-0.25, 0.1, 1.4], [0.25, 0.12, 1.5]])
+RADIUS = np.array([0.1, 0.1])
+IOR = np.array([1.52, 1.52])
+
+
+def _sphere_pixels(j=0, step=1):
+    """Pixels whose rays hit totem j (analytic), and their unit directions."""
+    vv, uu = np.mgrid[0:H:step, 0:W:step]
+    d = camera.pixel_rays(K, uu.ravel(), vv.ravel())
+    P = CENTERS[j]
+    b = d @ P
+    disc = b ** 2 - (P @ P - RADIUS[j] ** 2)
+    hit = disc > (0.3 * RADIUS[j]) ** 2          # away from the grazing rim
+    return d[hit], np.full(hit.sum(), j)
+
+
+def _integrator(seed=0, centers=CENTERS):
+    from inverse.integrator import TotemGridIntegrator
+
+    rng = np.random.default_rng(seed)
+    frame = frame_for_scene(K, (W, H), CENTERS, RADIUS)
+    density = rng.normal(-2.0, 1.0, (6, 8, 10, 1)).astype(np.float32)
+    colour = rng.random((3, 8, 10, 3)).astype(np.float32)
+    itg = TotemGridIntegrator(mi.Properties()).setup(frame, density, colour, centers,
+                                                     RADIUS, IOR)
+    itg.n_samples = 32
+    return itg, frame, density, colour
+
+
+# --------------------------------------------------------------------------- the frame
+
+def test_frame_round_trip_and_camera_columns():
+    frame = frame_for_scene(K, (W, H), CENTERS, RADIUS)
+    rng = np.random.default_rng(1)
+    g = rng.random((50, 3))
+    X = frame.from_unit(g)
+    assert np.allclose(frame.to_unit(X), g, atol=1e-9)
+    # Points along one camera ray share (s, t): the view is straight columns.
+    d = camera.pixel_rays(K, np.array([13.0]), np.array([41.0]))[0]
+    gs = frame.to_unit(np.outer(np.linspace(1.0, 5.0, 7), d))
+    assert np.ptp(gs[:, 0]) < 1e-9 and np.ptp(gs[:, 1]) < 1e-9
+    s, t = frame.pixel_to_st(13.0, 41.0)
+    assert np.allclose([s, t], gs[0, :2])
+    # r is inverse depth: even in 1/z.
+    z = frame.from_unit(np.array([[0.5, 0.5, 0.0], [0.5, 0.5, 0.5], [0.5, 0.5, 1.0]]))[:, 2]
+    assert np.isclose(z[0], frame.near) and np.isclose(z[2], frame.far)
+    assert np.isclose(1 / z[1], 0.5 * (1 / z[0] + 1 / z[2]))
+    back = FrustumFrame.from_dict(frame.to_dict())
+    assert np.allclose(back.K, frame.K) and back.u_range == frame.u_range
+    assert (back.near, back.far, back.v_range) == (frame.near, frame.far, frame.v_range)
+
+
+def test_resample_keeps_a_linear_field():
+    D, Hh, Ww = 4, 5, 6
+    z, y, x = np.meshgrid((np.arange(D) + 0.5) / D, (np.arange(Hh) + 0.5) / Hh,
+                          (np.arange(Ww) + 0.5) / Ww, indexing="ij")
+    f = (2 * x + 3 * y - z)[..., None]
+    g = resample(f, (8, 10, 12))
+    z2, y2, x2 = np.meshgrid((np.arange(8) + 0.5) / 8, (np.arange(10) + 0.5) / 10,
+                             (np.arange(12) + 0.5) / 12, indexing="ij")
+    inner = (slice(1, -1),) * 3
+    assert np.allclose(g[..., 0][inner], (2 * x2 + 3 * y2 - z2)[inner], atol=1e-5)
+
+
+# --------------------------------------------------------------------------- gradients
+
+def _totem_colour_sum(itg, d, j, weights):
+    L, valid, *_ = itg.render_totem_rays(d, j)
+    return dr.sum(dr.select(valid, weights[0] * L.x + weights[1] * L.y + weights[2] * L.z,
+                            0.0)), valid
+
+
+def test_grid_value_gradient_matches_finite_differences():
+    itg, frame, density, colour = _integrator()
+    d, j = _sphere_pixels(0, step=2)
+    wts = (0.3, 0.5, 0.2)
+    params = mi.traverse(itg)
+    dr.enable_grad(params["density"])
+    dr.enable_grad(params["colour"])
+    params.update()
+    f, valid = _totem_colour_sum(itg, d, j, wts)
+    assert np.asarray(valid).mean() > 0.8
+    dr.backward(f)
+    g_d = np.asarray(dr.grad(params["density"])).reshape(density.shape)
+    g_c = np.asarray(dr.grad(params["colour"])).reshape(colour.shape)
+
+    def value(den, col):
+        itg2 = _integrator()[0]
+        itg2.setup(frame, den, col, CENTERS, RADIUS, IOR)
+        return float(_totem_colour_sum(itg2, d, j, wts)[0][0])
+
+    for grid, g, which in ((density, g_d, "d"), (colour, g_c, "c")):
+        for idx in np.argsort(np.abs(g).ravel())[-3:]:
+            e = 1e-2
+            plus, minus = grid.copy(), grid.copy()
+            plus.ravel()[idx] += e
+            minus.ravel()[idx] -= e
+            if which == "d":
+                fd = (value(plus, colour) - value(minus, colour)) / (2 * e)
+            else:
+                fd = (value(density, plus) - value(density, minus)) / (2 * e)
+            assert abs(g.ravel()[idx]) > 1e-3
+            assert fd == pytest.approx(g.ravel()[idx], rel=0.05, abs=1e-3), (which, idx)
+
+
+def test_totem_centre_gradient_matches_finite_differences():
+    itg, frame, density, colour = _integrator(seed=3)
+    d, j = _sphere_pixels(0, step=2)
+    wts = (0.3, 0.5, 0.2)
+    params = mi.traverse(itg)
+    dr.enable_grad(params["centers"])
+    params.update()
+    f, _ = _totem_colour_sum(itg, d, j, wts)
+    dr.backward(f)
+    g = np.asarray(dr.grad(params["centers"])).reshape(3, -1).T   # (n, 3)
+    assert np.all(g[1] == 0)                  # totem 1 is not in these pixels
+    for a in range(3):
+        e = 5e-4
+        vals = []
+        for sgn in (1, -1):
+            c = CENTERS.copy()
+            c[0, a] += sgn * e
+            itg2 = _integrator(seed=3, centers=c)[0]
+            itg2.setup(frame, density, colour, c, RADIUS, IOR)
+            vals.append(float(_totem_colour_sum(itg2, d, j, wts)[0][0]))
+        fd = (vals[0] - vals[1]) / (2 * e)
+        assert fd == pytest.approx(float(g[0, a]), rel=0.1, abs=0.02 * float(np.abs(g[0]).max()))
+
+
+def test_camera_columns_through_mitsuba_render():
+    """The registered integrator renders the grid like render_view does (no totems)."""
+    from inverse import fit
+    from inverse.integrator import TotemGridIntegrator
+
+    loaded = mi.load_dict({"type": "totem_grid", "n_samples": 8})
+    assert isinstance(loaded, TotemGridIntegrator) and loaded.n_samples == 8
+    itg, frame, *_ = _integrator(seed=5)
+    itg.totems = False
+    scene = mi.load_dict({"type": "scene",
+                          "sensor": camera.mitsuba_sensor(K, W, H, spp=4)})
+    img = np.asarray(mi.render(scene, integrator=itg, spp=4))
+    recon, depth = fit.render_view(itg, frame, (W, H), n=32)
+    lin = fit.srgb_to_linear(recon)
+    # Pixel footprints differ (random sub-pixel positions), so compare means/edges.
+    assert np.abs(img - lin).mean() < 0.02
+    assert np.all((depth >= frame.near - 1e-4) & (depth <= frame.far + 1e-3))
+
+
+# --------------------------------------------------------------------------- the fit
+
+@pytest.fixture(scope="module")
+def small_scene(tmp_path_factory):
+    from scenes import folder, presets, render
+
+    desc = presets.describe("box", 3, size=(160, 120), n_totems=4)
+    image = render.render(desc, spp=16)
+    masks = render.totem_masks(desc)
+    truth = np.array([t["center"] for t in desc["totems"]])
+    scene = folder.Scene(path=tmp_path_factory.mktemp("s"), image=image,
+                         K=np.asarray(desc["K"]), masks=masks,
+                         radius=np.array([t["radius"] for t in desc["totems"]]),
+                         ior=np.array([t["ior"] for t in desc["totems"]]))
+    return scene, truth
+
+
+@pytest.mark.slow
+def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path):
+    from inverse import fit
+
+    scene, truth = small_scene
+    init = truth.copy()
+    init[1] += np.array([0.012, -0.008, 0.0])
+    scene = dataclasses.replace(scene, initial_pose=init)
+    st = fit.FitSettings(density_res=(16, 24, 32), colour_res=(1, 30, 40),
+                         stages=((0.5, 20), (1.0, 30)), n_samples=32, lr_pose=1e-3,
+                         pose_start=0.3, render_samples=32)
+    r = fit.fit_scene(scene, settings=st)
+    photo = np.asarray(r.history["photo"])
+    assert photo[-5:].mean() < 0.8 * photo[:3].mean()
+    err0 = np.abs(init[1] - truth[1]).sum()
+    err1 = np.abs(r.centers[1] - truth[1]).sum()
+    assert err1 < 0.8 * err0
+    assert np.allclose(r.initial, init)
+    assert r.recon.shape == (120, 160, 3) and r.recon.dtype == np.float32
+    assert np.all((r.recon >= 0) & (r.recon <= 1))
+    assert r.totem_points.shape[1] == 3 and len(r.totem_points) > 100
+    # The fitted totem pixels resemble the observed ones more than a flat colour does.
+    m = scene.masks.any(0) & (r.totem_pred.sum(2) > 0)
+    obs = scene.image[m]
+    assert np.abs(r.totem_pred[m] - obs).mean() < np.abs(obs.mean(0) - obs).mean()
+
+    # write_fit / load_fit round trip, and re-rendering from the saved grid.
+    fit.write_fit(r, tmp_path / "fit", scene=scene)
+    back = fit.load_fit(tmp_path / "fit")
+    assert np.allclose(back.centers, r.centers) and np.allclose(back.initial, r.initial)
+    assert np.allclose(back.totem_points, r.totem_points)
+    assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
+    assert back.scene_fingerprint == fit.scene_fingerprint(scene)
+    recon2, _ = fit.render_grid(back.grid, scene.size, n=32)
+    assert np.abs(recon2 - r.recon).max() < 1e-3
+    assert fit.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
+        != back.scene_fingerprint
+
+
+def test_load_fit_refuses_missing_or_corrupt(tmp_path):
+    from inverse import fit
+
+    with pytest.raises(BadInput):
+        fit.load_fit(tmp_path / "nothing")
+    d = tmp_path / "fit"
+    d.mkdir()
+    for name in fit.FIT_FILES:
+        (d / name).write_bytes(b"garbage")
+    with pytest.raises(BadInput):
+        fit.load_fit(d)
+
+
+def test_bad_input(small_scene):
+    from inverse import fit
+
+    scene, truth = small_scene
+    nan = scene.image.copy()
+    nan[3, 4, 1] = np.nan
+    with pytest.raises(BadInput, match="NaN"):
+        fit.fit_scene(dataclasses.replace(scene, image=nan))
+    with pytest.raises(BadInput, match="no totem pixels"):
+        fit.fit_scene(dataclasses.replace(scene, masks=np.zeros_like(scene.masks)))
+    # A key whose radius puts the totems behind the camera: no usable ray.
+    with pytest.raises(BadInput):
+        fit.fit_scene(dataclasses.replace(scene, radius=np.full(4, 5.0)),
+                      true_pose=truth)
