@@ -45,7 +45,7 @@ PHOTO_TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field
 WALL_TEXTURES = ("brick", "grass", "gravel", "camera", "moon", "coins", "checkerboard",
                  "text", "hubble_deep_field", "immunohistochemistry", "astronaut")
 FLOOR_TEXTURES = ("gravel", "brick", "grass", "checkerboard", "coins")
-ENV_PHOTOS = ("rocket", "coffee", "chelsea", "astronaut", "hubble_deep_field")
+ENV_PHOTOS = ("rocket", "coffee", "chelsea", "astronaut", "cat")
 
 TOTEM_RADIUS = 0.1
 TOTEM_IOR = 1.52
@@ -164,8 +164,9 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
     floor = CAMERA_HEIGHT
     depth, cz = back - front, 0.5 * (back + front)
     height, cy = floor - ceil, 0.5 * (floor + ceil)
-    wall_tex = [str(t) for t in rng.choice(WALL_TEXTURES, size=5, replace=False)]
     floor_tex = str(rng.choice(FLOOR_TEXTURES))
+    walls = [t for t in WALL_TEXTURES if t != floor_tex]
+    wall_tex = [str(t) for t in rng.choice(walls, size=5, replace=False)]
     up, fwd = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])
     # (name, centre, inward normal, texture-down direction, width, height)
     specs = [
@@ -192,7 +193,7 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
         x = 0.0 if n_lights == 1 else (-0.75 if j == 0 else 0.75)
         z = rng.uniform(1.8, 3.0)
         w, d = rng.uniform(0.9, 1.3), rng.uniform(0.8, 1.1)
-        power = 16.0 / n_lights / (w * d)
+        power = 20.0 / n_lights / (w * d)
         warm = rng.uniform(0.85, 1.0)
         to_world = _affine(R, [0, 0, 0]) @ panel([x, ceil + 0.01, z], -up, -fwd, w, d)
         lights.append({"name": f"light_{j}", "kind": "rectangle",
@@ -213,7 +214,7 @@ def _outdoor(rng, R: np.ndarray) -> tuple[list, dict]:
     # Mitsuba's envmap has +y up; the room's up is -y, pitched into the camera frame.
     flip = np.diag([-1.0, -1.0, 1.0])
     turn = _yaw(rng.uniform(0.0, 360.0))
-    env = {"image": str(rng.choice(ENV_PHOTOS)), "scale": round(float(rng.uniform(1.6, 2.4)), 3),
+    env = {"image": str(rng.choice(ENV_PHOTOS)), "scale": round(float(rng.uniform(2.0, 3.0)), 3),
            "to_world": _affine(R @ turn @ flip, [0, 0, 0]).tolist()}
     return [ground], env
 

@@ -116,14 +116,20 @@ def _bitmap(name: str, kind: str = "texture", tint=(1.0, 1.0, 1.0)):
 
 
 def envmap_image(img: np.ndarray) -> np.ndarray:
-    """A seamless 2:1 lat-long panorama from a photograph: the photo, its mirror
-    image, the photo again, its mirror (so the left and right ends meet)."""
+    """A seamless 2:1 lat-long panorama (sRGB uint8) from a photograph.
+
+    The upper hemisphere holds the photo four times around the horizon, mirrored
+    every other time so the ends meet (each copy spans 90 degrees by 90 degrees);
+    the lower hemisphere is the upper one mirrored about the horizon at half
+    brightness, like a dull ground.
+    """
     from skimage.transform import resize
 
     h = 256
     tile = resize(img, (h, h), order=1, preserve_range=True, anti_aliasing=True)
-    pano = np.concatenate([tile, tile[:, ::-1], tile, tile[:, ::-1]], axis=1)
-    return pano.astype(np.uint8)
+    sky = np.concatenate([tile, tile[:, ::-1], tile, tile[:, ::-1]], axis=1)
+    pano = np.concatenate([sky, 0.5 * sky[::-1]], axis=0)
+    return np.clip(pano + 0.5, 0, 255).astype(np.uint8)
 
 
 # --------------------------------------------------------------------------- description
