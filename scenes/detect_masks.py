@@ -22,8 +22,9 @@ from scenes.errors import BadInput
 N_RAYS = 180
 MIN_SUPPORT = 0.6        # fraction of rays that must find the fitted edge
 MIN_AXIS_RATIO = 0.75    # a sphere seen by a normal lens: minor/major axis of its image
-MIN_SCORE = 2.5          # step across the contour over the gradient around it
-MAX_CANDIDATES = 16
+MIN_SCORE = 0.2          # circle score (see _candidates) of a totem when n is not given
+MAX_CANDIDATES = 12
+WORK_SIZE = 240          # candidates are searched on a copy with this shorter side
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
@@ -34,32 +35,77 @@ def _gray(image: np.ndarray) -> np.ndarray:
     return img[..., :3] @ np.array([0.299, 0.587, 0.114], np.float32)
 
 
-def _candidates(gray: np.ndarray, r_min: float, r_max: float) -> np.ndarray:
-    """Circle candidates (m, 3): centre x, y and radius in pixels."""
+def _orientation_field(img: np.ndarray, sigma: float = 1.0):
+    """Doubled-angle gradient orientation (cos 2t, sin 2t) of a colour image, each
+    pixel weighted by its edge strength saturated at the 90th percentile (so a strong
+    texture edge counts no more than a faint silhouette edge)."""
     import cv2
 
-    g8 = (np.clip(gray, 0, 1) * 255 + 0.5).astype(np.uint8)
-    g8 = cv2.GaussianBlur(g8, (0, 0), 1.0)
-    found = []
-    for param2 in (0.8, 0.6):       # "circle perfectness": strict first, then looser
-        c = cv2.HoughCircles(g8, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=r_min,
-                             param1=60, param2=param2, minRadius=int(r_min),
-                             maxRadius=int(np.ceil(r_max)))
-        if c is not None:
-            found.append(c.reshape(-1, 3))
-        c = cv2.HoughCircles(g8, cv2.HOUGH_GRADIENT, dp=1, minDist=r_min, param1=100,
-                             param2=max(10, int(r_min)), minRadius=int(r_min),
-                             maxRadius=int(np.ceil(r_max)))
-        if c is not None:
-            found.append(c.reshape(-1, 3)[:20])
-    if not found:
-        return np.zeros((0, 3))
-    kept = []                           # Hough's order is by votes: keep distinct ones
-    for c in np.concatenate(found):
-        if all(np.hypot(*(c[:2] - k[:2])) > 0.3 * k[2] or abs(c[2] - k[2]) > 0.3 * k[2]
-               for k in kept):
-            kept.append(c)
-    return np.array(kept[:MAX_CANDIDATES])
+    sm = cv2.GaussianBlur(img, (0, 0), sigma)
+    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    if gx.ndim == 3:
+        jxx, jyy, jxy = (gx * gx).sum(-1), (gy * gy).sum(-1), (gx * gy).sum(-1)
+    else:
+        jxx, jyy, jxy = gx * gx, gy * gy, gx * gy
+    e2 = jxx + jyy
+    sat = np.minimum(np.sqrt(e2) / (np.percentile(np.sqrt(e2), 90) + 1e-6), 1.0)
+    k = sat / (e2 + 1e-12)
+    return (jxx - jyy) * k, 2 * jxy * k
+
+
+def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.ndarray:
+    """Circle candidates (m, 4): centre x, y, radius (pixels of ``img``) and score.
+
+    For every centre and radius (5% steps) the mean of cos(2 phi) over a thin ring, phi
+    the angle between the image gradient and the ring's normal, is computed in each of
+    four sectors (right, bottom, left, top) as FFT correlations. A sphere's silhouette
+    is an edge all the way round; floor tiles and texture line up with a circle over a
+    part of it only, so the score is the worst sector, less the same measure on rings
+    0.78 and 1.25 times as large (texture that lines up with every circle).
+    """
+    import scipy.fft as sf
+    from scipy.ndimage import maximum_filter
+
+    step = 1.05
+    radii = r_min * step ** np.arange(
+        int(np.log(r_max / r_min) / np.log(step)) + 1)
+    i_in = int(np.round(np.log(0.78) / np.log(step)))
+    i_out = int(np.round(np.log(1.25) / np.log(step)))
+    all_r = radii[0] * step ** np.arange(i_in, len(radii) + i_out)
+    a, b = _orientation_field(img)
+    H, W = a.shape
+    pad = int(np.ceil(all_r.max() + 3 * (0.8 + 0.04 * all_r.max()))) + 1
+    Hp, Wp = sf.next_fast_len(H + pad), sf.next_fast_len(W + pad)
+    zf = sf.fft2((a - 1j * b).astype(np.complex64), (Hp, Wp))
+    y = np.fft.fftfreq(Hp, 1 / Hp)[:, None].astype(np.float32)
+    x = np.fft.fftfreq(Wp, 1 / Wp)[None, :].astype(np.float32)
+    rho, th = np.hypot(x, y), np.arctan2(y, x)
+    e2 = np.exp(-2j * th).astype(np.complex64)
+    sectors = [np.maximum(np.cos(th - 0.5 * np.pi * j), 0) ** 2 for j in range(4)]
+    S = np.empty((len(all_r), 4, H, W), np.float32)
+    for k, r in enumerate(all_r):
+        w = np.exp(-0.5 * ((rho - r) / (0.8 + 0.04 * r)) ** 2)
+        for j, sec in enumerate(sectors):
+            ws = w * sec
+            S[k, j] = sf.ifft2(zf * np.conj(sf.fft2(ws * e2 / ws.sum()))).real[:H, :W]
+    off = -i_in
+    C = np.empty((len(radii), H, W), np.float32)
+    for k in range(len(radii)):
+        c = S[k + off] - np.maximum(np.maximum(S[k + off + i_in], S[k + off + i_out]), 0)
+        C[k] = c.min(0) * np.sqrt(radii[k] / 20.0)
+    peak = (C == maximum_filter(C, size=(5, 7, 7))) & (C > 0)
+    pk = np.argwhere(peak)
+    vals = C[tuple(pk.T)]
+    out = []
+    for i in np.argsort(-vals):
+        (k, v, u), r = pk[i], radii[pk[i][0]]
+        if any(np.hypot(u - q[0], v - q[1]) < 0.5 * max(r, q[2]) for q in out):
+            continue
+        out.append((u, v, r, vals[i]))
+        if len(out) >= keep:
+            break
+    return np.array(out, float).reshape(-1, 4)
 
 
 def _gradients(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -97,51 +143,60 @@ def _edge_along(p, gx, gy, n: int = 120) -> np.ndarray:
 
 
 def _contrast(p, gx, gy) -> float:
-    """Mean step across the ellipse p over the mean step across scaled copies of it."""
+    """Step across the ellipse p over the step across scaled copies of it, in the worst
+    of four sectors (a silhouette is an edge all the way round, texture is not)."""
     cx, cy, a, b, ang = p
-    around = np.concatenate([_edge_along((cx, cy, a * f, b * f, ang), gx, gy)
-                             for f in (0.6, 0.7, 0.8, 1.25, 1.4, 1.55)])
-    return float(_edge_along(p, gx, gy).mean() / (around.mean() + 1e-6))
+    on = _edge_along(p, gx, gy).reshape(4, -1)
+    around = np.stack([_edge_along((cx, cy, a * f, b * f, ang), gx, gy).reshape(4, -1)
+                       for f in (0.7, 0.8, 1.25, 1.4)])
+    return float((on.mean(1) / (around.mean((0, 2)) + 1e-6)).min())
 
 
-def _refine(img: np.ndarray, cand, shape):
+def _orientation_along(p, a, b, n: int = 180) -> np.ndarray:
+    """cos(2 phi) (n,) at n points of the ellipse p, phi the angle between the image
+    gradient and the ellipse normal, weighted by saturated edge strength
+    (``a``, ``b`` from :func:`_orientation_field`)."""
+    import cv2
+
+    pts, nrm = _ellipse_points(p, n)
+    X, Y = pts[None, :, 0].astype(np.float32), pts[None, :, 1].astype(np.float32)
+    sa = cv2.remap(a, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
+    sb = cv2.remap(b, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
+    c2 = nrm[:, 0] ** 2 - nrm[:, 1] ** 2
+    s2 = 2 * nrm[:, 0] * nrm[:, 1]
+    return sa * c2 + sb * s2
+
+
+def _refine(field, cand, shape):
     """Fit an ellipse to the silhouette near a candidate circle (cx, cy, r).
 
-    The ellipse (cx, cy, a, b, angle) maximising the mean image step across it is found
-    coarse to fine (blur 2, 1, 0.5 px; Nelder-Mead): a whole contour is fitted at once,
-    so texture edges that cross it do not pull it away. Returns (ellipse as cv2
-    ((cx, cy), (2a, 2b), angle_deg), score) or None. The score is the step across the
-    ellipse over the mean gradient near it (a contour, not texture: > 1).
+    The ellipse (cx, cy, a, b, angle) along which the image gradient is best aligned
+    with the normal (saturated strength, :func:`_orientation_along`) is found by
+    Nelder-Mead from the circle: a whole contour is fitted at once, so texture edges
+    that cross it do not pull it away. Returns the ellipse as cv2
+    ((cx, cy), (2a, 2b), angle_deg), or None when the fit leaves the candidate, is not
+    sphere-like or is cut by the frame.
     """
     from scipy.optimize import minimize
 
-    cx, cy, r = (float(v) for v in cand)
-    p, best = None, None
-    for sigma in (2.0, 1.0, 0.5):
-        gx, gy = _gradients(img, sigma)
-        starts = [p] if p is not None else [np.array([cx, cy, r * f, r * f, 0.0])
-                                            for f in (0.85, 1.0, 1.15)]
-        fits = [minimize(lambda q: -_edge_along(q, gx, gy).mean(), s0, method="Nelder-Mead",
-                         options=dict(xatol=0.02, fatol=1e-7, maxiter=300)) for s0 in starts]
-        best = min(fits, key=lambda f: f.fun)
-        p = best.x
-        if sigma == 2.0 and _contrast(p, gx, gy) < 0.5 * MIN_SCORE:
-            return None                 # no contour here: skip the finer fits
+    a_f, b_f = field
+    cx, cy, r = (float(v) for v in cand[:3])
+    p0 = np.array([cx, cy, r, r * 1.01, 0.1])
+    p = minimize(lambda q: -_orientation_along(q, a_f, b_f).mean()
+                 if min(abs(q[2]), abs(q[3])) > 2 else 0.0, p0, method="Nelder-Mead",
+                 options=dict(xatol=0.02, fatol=1e-6, maxiter=600)).x
     cx, cy, a, b, ang = p
     a, b = abs(a), abs(b)
     H, W = shape
     if not (np.isfinite(p).all() and min(a, b) > 3) or min(a, b) / max(a, b) < MIN_AXIS_RATIO:
         return None
+    if np.hypot(cx - cand[0], cy - cand[1]) > 0.4 * r or not 0.75 < (a + b) / (2 * r) < 1.3:
+        return None                     # wandered off to another contour
     R = max(a, b)
     if cx - R < -0.2 * R or cy - R < -0.2 * R or cx + R > W - 1 + 0.2 * R \
             or cy + R > H - 1 + 0.2 * R:
         return None                     # cut by the frame: not a usable totem
-    on = _edge_along(p, gx, gy)
-    support = np.mean(on > 0.5 * np.median(on))
-    score = _contrast(p, gx, gy)
-    if support < MIN_SUPPORT:
-        return None
-    return ((cx, cy), (2 * a, 2 * b), float(np.degrees(ang))), score
+    return ((cx, cy), (2 * a, 2 * b), float(np.degrees(ang)))
 
 
 def ellipse_mask(ell, shape) -> np.ndarray:
@@ -180,32 +235,35 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
     short = min(H, W)
     r_min = max(5.0, 0.015 * short) if r_min is None else float(r_min)
     r_max = 0.25 * short if r_max is None else float(r_max)
-    gray = _gray(img)
-    colour = np.ascontiguousarray(img[..., :3])
+    import cv2
 
-    found = []                           # (ellipse, score)
-    for cand in _candidates(gray, r_min, r_max):
-        out = _refine(colour, cand, (H, W))
-        if out is None:
-            continue
-        ell, score = out
-        if score < MIN_SCORE:
-            continue
+    colour = np.ascontiguousarray(img[..., :3])
+    scale = min(1.0, WORK_SIZE / short)        # candidates on a small copy, fits at full size
+    small = colour if scale == 1.0 else cv2.resize(colour, None, fx=scale, fy=scale,
+                                                   interpolation=cv2.INTER_AREA)
+    keep = MAX_CANDIDATES if n is None else max(MAX_CANDIDATES, 3 * n)
+    cands = _candidates(small, max(4.0, r_min * scale), r_max * scale, keep)
+    cands[:, :3] /= scale
+
+    if n is None:
+        cands = cands[cands[:, 3] >= MIN_SCORE]
+    field = _orientation_field(colour, 1.0)
+    found = []                           # (ellipse, score), best first
+    for cand in cands:
+        ell = _refine(field, cand, (H, W))
+        if ell is None:                  # keep the circle when the fit fails
+            ell = ((cand[0], cand[1]), (2 * cand[2], 2 * cand[2]), 0.0)
+        found.append((ell, cand[3]))
+    chosen = []                          # greedy: best first, no two overlapping
+    for ell, score in found:
         (cx, cy), (A, B), _ = ell
-        if not r_min * 0.8 <= 0.25 * (A + B) <= r_max * 1.2:
-            continue
-        dup = [k for k, (e, _) in enumerate(found)
-               if np.hypot(e[0][0] - cx, e[0][1] - cy) < 0.5 * max(e[1]) / 2 + 0.5 * max(A, B) / 2]
-        if dup:
-            k = dup[0]
-            if score > found[k][1]:
-                found[k] = (ell, score)
-            continue
-        found.append((ell, score))
+        if all(np.hypot(e[0][0] - cx, e[0][1] - cy) > 0.5 * (max(e[1]) + max(A, B)) * 0.9
+               for e, _ in chosen):
+            chosen.append((ell, score))
+    found = chosen
     if not found:
         raise BadInput("no totem found in the photo; draw its masks by hand "
                        "(totem_masks/totem_000.png, white = totem)")
-    found.sort(key=lambda t: -t[1])
     if n is not None:
         if len(found) < n:
             raise BadInput(f"found {len(found)} totems but {n} were expected; draw the "
