@@ -69,11 +69,11 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     order = np.argsort([np.nonzero(m)[1].mean() for m in masks], kind="stable")
     masks = masks[order]
     pose = np.array([t["center"] for t in desc["totems"]], float)[order]
-    record = dict(desc, spp=int(spp), sampler=render.sampler_type(spp), sampler_seed=sampler_seed,
-                  timings=timings)
-    return folder.write_scene(out, image=image, K=np.asarray(desc["K"], float), masks=masks,
-                              radius=float(radius), ior=float(ior),
-                              truth=folder.Truth(clean=clean, totem_pose=pose, scene=record))
+    record = dict(desc, spp=int(spp), sampler=render.sampler_type(spp),
+                  sampler_seed=sampler_seed, timings=timings)
+    truth = folder.Truth(clean=clean, totem_pose=pose, scene=record)
+    return folder.write_scene(out, image=image, K=np.asarray(desc["K"], float),
+                              masks=masks, radius=float(radius), ior=float(ior), truth=truth)
 
 
 def _bar(enabled: bool, total: int):

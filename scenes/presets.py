@@ -214,7 +214,8 @@ def _outdoor(rng, R: np.ndarray) -> tuple[list, dict]:
     # Mitsuba's envmap has +y up; the room's up is -y, pitched into the camera frame.
     flip = np.diag([-1.0, -1.0, 1.0])
     turn = _yaw(rng.uniform(0.0, 360.0))
-    env = {"image": str(rng.choice(ENV_PHOTOS)), "scale": round(float(rng.uniform(2.0, 3.0)), 3),
+    env = {"image": str(rng.choice(ENV_PHOTOS)),
+           "scale": round(float(rng.uniform(2.0, 3.0)), 3),
            "to_world": _affine(R @ turn @ flip, [0, 0, 0]).tolist()}
     return [ground], env
 
@@ -263,7 +264,8 @@ def place_totems(rng, K: np.ndarray, size, n: int, radius: float, ior: float,
         pad = margin_px / K[0, 0]
         for i in range(n):
             for j in range(i + 1, n):
-                ok &= bool(np.arccos(np.clip(d[i] @ d[j], -1, 1)) > alpha[i] + alpha[j] + pad)
+                angle = np.arccos(np.clip(d[i] @ d[j], -1.0, 1.0))
+                ok &= bool(angle > alpha[i] + alpha[j] + pad)
         if ok:
             P = P[np.argsort(P[:, 0] / P[:, 2])]
             return [{"center": [round(float(c), 6) for c in p], "radius": float(radius),

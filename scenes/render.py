@@ -8,6 +8,7 @@ the world frame: OpenCV, +x right, +y down, +z forward, metres)::
       "preset": "box" | "envmap",   "seed": int,
       "size": [W, H],                               # pixels
       "K": 3x3 list,                                # intrinsics, pixel-centre convention
+      "fov_x_deg": float,                           # informational; K rules
       "max_depth": int,                             # path length (optional, default 8)
       "objects": [ {
           "id": int,              # unique over objects and lights, >= 0
@@ -189,6 +190,7 @@ def _shapes(obj: dict) -> dict:
 def scene_dict(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=(),
                integrator: dict | None = None) -> tuple[dict, dict]:
     """The Mitsuba scene dict of a description, and its shape key -> our id map."""
+    backend.use()
     W, H = _check(desc)
     exclude = {int(i) for i in exclude_ids}
     K = np.asarray(desc["K"], float)

@@ -148,6 +148,18 @@ def test_bad_descriptions_are_bad_input():
         render.shape_ids(desc)
 
 
+def test_make_scene_refuses_bad_requests_before_rendering(tmp_path):
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "x").write_text("keep me")
+    with pytest.raises(BadInput, match="not empty"):
+        make.make_scene(tmp_path / "full", size=(W, H), spp=1)
+    assert (tmp_path / "full" / "x").read_text() == "keep me"
+    for kw in ({"spp": 0}, {"n_totems": 0}, {"preset": "kitchen"}, {"n_totems": 9}):
+        with pytest.raises(BadInput):
+            make.make_scene(tmp_path / "new", size=(W, H), **kw)
+    assert not (tmp_path / "new").exists()
+
+
 @pytest.fixture(scope="module")
 def scene_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("scenes") / "box"
