@@ -67,6 +67,13 @@ class FitSettings:
     far_factor: float = 6.0
     render_samples: int = 128
     seed: int = 0
+    sweep: bool = True               # initialise the grid by plane-sweep stereo
+    sweep_res: tuple = (60, 80)      # (rows, columns) of the sweep's map
+    sweep_slices: int = 64
+    surface_density: float = 3.0     # raw density of the swept surface voxels
+    empty_density: float = -6.0      # raw density in front of the swept surface
+    reflection: bool = True          # model the glass's front reflection (an ambient colour)
+    lr_ambient: float = 0.002
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -259,7 +266,23 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
 
     # Initial colour: the mean observed radiance, undoing the Fresnel loss (~0.9).
     mean_lin = srgb_to_linear(observed).mean(0) / 0.9
+    # The glass also reflects (Fresnel R = 1 - sqrt(T_F) at each of the two equal
+    # interfaces): modelled as R times one ambient linear colour, first the mean.
+    o_np, dout_np, T_np, ok_np = _totem_rays_np(itg, d_cam, jt)
+    refl_np = np.where(ok_np, 1.0 - np.sqrt(np.clip(T_np, 0.0, 1.0)), 0.0) \
+        if settings.reflection else np.zeros(n_rays)
+    ambient0 = srgb_to_linear(observed).mean(0)
+    t0 = time.perf_counter()
+    swept = None
+    if settings.sweep:
+        lin = srgb_to_linear(observed) - refl_np[:, None] * ambient0[None]
+        keep = ok_np & (T_np > 0.05)
+        col = linear_to_srgb(np.clip(lin[keep], 0.0, None) / T_np[keep, None])
+        swept = _sweep_init(frame, o_np[keep], dout_np[keep], jt[keep], col, settings)
+    t_sweep = time.perf_counter() - t0
     obs_dr = mi.Color3f(observed[:, 0], observed[:, 1], observed[:, 2])
+    refl_dr = mi.Float(refl_np.astype(np.float32))
+    ambient = mi.Float(ambient0.astype(np.float32))
 
     # ---- schedule
     stages = [(float(f), int(s)) for f, s in settings.stages]
@@ -277,6 +300,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     density = d0
     colour = np.broadcast_to(mean_lin.astype(np.float32),
                              tuple(settings.colour_res) + (3,)).copy()
+    if swept is not None:
+        density, colour = swept
     centers = initial.copy()
     bar = None
     if progress:
@@ -295,6 +320,9 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         opt["density"] = params["density"]
         opt["colour"] = params["colour"]
         opt.set_learning_rate({"density": settings.lr_density, "colour": settings.lr_colour})
+        if settings.reflection:
+            opt["ambient"] = ambient
+            opt.set_learning_rate({"ambient": settings.lr_ambient})
         params.update(opt)
         tv_d, tv_c = _TV(density.shape), _TV(colour.shape)
         pose_on = False
@@ -306,6 +334,10 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                 params.update(opt)
                 pose_on = True
             L, valid, w, m, *_ = itg.render_totem_rays(d_cam, jt)
+            if settings.reflection:
+                amb = opt["ambient"]
+                L = L + refl_dr * mi.Color3f(*[dr.gather(mi.Float, amb, i, mode=dr.ReduceMode.Direct)
+                                                for i in range(3)])
             pred = mi.Color3f(*[_dr_linear_to_srgb(L[i]) for i in range(3)])
             vmask = dr.select(valid, 1.0, 0.0)
             diff = pred - obs_dr
@@ -335,6 +367,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                 bar.set_postfix(loss=f"{history['loss'][-1]:.4g}")
         density = np.array(params["density"].numpy())
         colour = np.array(params["colour"].numpy())
+        if settings.reflection:
+            ambient = mi.Float(np.maximum(np.asarray(opt["ambient"]), 0.0))
         if pose_on:
             centers = itg.center_numpy()
     if bar is not None:
@@ -346,7 +380,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     itg.setup(frame, density, colour, centers, radius, ior)
     recon, depth = render_view(itg, frame, (W, H), n=settings.render_samples)
     L, valid, w, m, g0, g1 = itg.render_totem_rays(d_cam, jt)
-    pred = linear_to_srgb(np.asarray(L).T)
+    pred = linear_to_srgb(np.asarray(L).T + refl_np[:, None] * np.asarray(ambient)[None])
     totem_pred = np.zeros((H, W, 3), np.float32)
     totem_pred[v, u] = pred
     totem_points = _peak_points(frame, np.asarray(w), np.asarray(m), np.asarray(g0),
@@ -356,6 +390,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
     timings = {
         "pose_init_s": t_pose,
+        "sweep_s": t_sweep,
         "first_step_s": step_times[0] if step_times else None,
         "steady_step_s": steady,
         "optimise_s": float(np.sum(step_times)),
@@ -378,6 +413,49 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene))
+
+
+def _totem_rays_np(itg, d_cam, jt):
+    """Refracted rays at the integrator's centres, numpy: exit points (m, 3) metres,
+    unit directions (m, 3), Fresnel transmittance (m,), valid (m,)."""
+    import mitsuba as mi
+
+    from inverse.sphere import totem_rays
+
+    j = np.asarray(jt, np.int64)
+    c = itg.center_numpy()
+    P = mi.Point3f(*[mi.Float(c[j, a].astype(np.float32)) for a in range(3)])
+    R = mi.Float(np.asarray(itg.radius, np.float32)[j])
+    eta = mi.Float(np.asarray(itg.ior, np.float32)[j])
+    d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
+    o_out, d_out, T_F, ok = totem_rays(mi.Point3f(0.0), d, P, R, eta)
+    return (np.asarray(o_out, np.float64).T.reshape(-1, 3),
+            np.asarray(d_out, np.float64).T.reshape(-1, 3),
+            np.asarray(T_F, np.float64).reshape(-1), np.asarray(ok, bool).reshape(-1))
+
+
+def _sweep_init(frame, o, d, jt, colour, settings):
+    """Density and colour grids initialised from plane-sweep stereo (:mod:`inverse.sweep`).
+
+    ``o, d`` refracted rays (numpy), ``colour`` the sRGB radiance each carries.
+    Density: a surface (``surface_density``) in the voxels around each column's swept
+    depth, empty (``empty_density``) in front of it, ``density_init`` behind. Colour:
+    the swept consensus colour (linear), the same in every depth slice.
+    """
+    from inverse.sweep import plane_sweep
+
+    sw = plane_sweep(o, d, colour, jt, frame, settings.sweep_res,
+                     n_slices=settings.sweep_slices)
+    nr, nt, ns = settings.density_res
+    r_map = resample(sw.r[None, ..., None].astype(np.float32), (1, nt, ns))[0, ..., 0]
+    r_vox = (np.arange(nr) + 0.5) / nr
+    diff = (r_vox[:, None, None] - r_map[None]) * nr            # in voxels
+    density = np.where(diff < -0.75, settings.empty_density,
+                       np.where(diff <= 0.75, settings.surface_density,
+                                settings.density_init)).astype(np.float32)[..., None]
+    lin_map = srgb_to_linear(np.clip(sw.colour, 0.0, 1.0)).astype(np.float32)
+    colour = resample(lin_map[None], tuple(settings.colour_res))
+    return density, colour
 
 
 def _outline_term(masks, K, radius):
@@ -404,7 +482,8 @@ def _outline_term(masks, K, radius):
 
     def term(centers_flat):
         i = dr.arange(mi.UInt32, n)
-        P = mi.Point3f(*[dr.gather(mi.Float, centers_flat, i + a * n) for a in range(3)])
+        P = mi.Point3f(*[dr.gather(mi.Float, centers_flat, i + a * n,
+                                     mode=dr.ReduceMode.Direct) for a in range(3)])
         return outline_loss(P, R, rays_dr, idx_dr, scale=fx)
 
     return term

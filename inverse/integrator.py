@@ -195,7 +195,7 @@ def select_center(centers, index):
     P = [mi.Float(0.0)] * 3
     for j in range(n_tot):
         is_j = index == j
-        P = [dr.select(is_j, dr.gather(mi.Float, centers[a], j), P[a]) for a in range(3)]
+        P = [dr.select(is_j, dr.gather(mi.Float, centers[a], j, mode=dr.ReduceMode.Direct), P[a]) for a in range(3)]
     return mi.Point3f(*P)
 
 
@@ -248,7 +248,8 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         """The centres as three mi.Float of width n_totems (x, y, z)."""
         n = dr.width(self.centers) // 3
         idx = dr.arange(mi.UInt32, n)
-        return [dr.gather(mi.Float, self.centers, idx + a * n) for a in range(3)]
+        return [dr.gather(mi.Float, self.centers, idx + a * n, mode=dr.ReduceMode.Direct)
+                for a in range(3)]
 
     def center_numpy(self) -> np.ndarray:
         """(n, 3) centres, metres."""

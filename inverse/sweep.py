@@ -1,0 +1,217 @@
+"""Plane-sweep stereo between the totems: a depth and colour map of the camera view.
+
+The totems see the scene from a few nearby viewpoints (their refracted rays start at
+the sphere exits). A surface point at depth ``z`` is where the rays of *several*
+totems that see the same colour meet. The frustum grid's depth slices are
+fronto-parallel planes ``z = z_k`` (even in inverse depth), so the sweep runs in the
+grid's own frame (:mod:`inverse.grid`): for each slice, every totem ray is cut with
+the plane, the point is projected into the camera (grid cell ``(t, s)``) and the
+ray's colour is splatted there (bilinear), per totem. Per totem, the splats are
+spread by a Gaussian (normalised convolution: mean colour where the totem has rays,
+nothing elsewhere). The photo-consistency cost of a cell is the variance of the
+totems' mean colours there (only where >= 2 totems land, a fixed penalty elsewhere),
+box-filtered over a small window; each column's depth is the slice of least cost,
+median-filtered, holes filled. The colour map is the totems' consensus colour at
+that depth, holes filled by pull-push.
+
+Everything is numpy over all rays at once (loops over slices and totems only).
+Colours are whatever the caller splats (here: sRGB of the Fresnel-corrected radiance).
+
+Public functions
+----------------
+``slice_depths(frame, n) -> (n,) z`` metres, slice centres even in inverse depth;
+``plane_sweep(o, d, colour, totem, frame, res, *, ...) -> SweepResult``;
+``pull_push(values, weight) -> values`` hole filling of a 2-D map.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from inverse.grid import FrustumFrame
+
+
+@dataclass
+class SweepResult:
+    """Outcome of :func:`plane_sweep` on an ``(nt, ns)`` map of grid columns.
+
+    Attributes
+    ----------
+    r : (nt, ns) unit inverse-depth coordinate of the surface per column (grid ``r``).
+    depth : (nt, ns) metres, camera-frame ``z`` of the surface.
+    colour : (nt, ns, C) consensus colour at that depth (holes filled).
+    confident : (nt, ns) bool, the depth came from >= 2 agreeing totems (not filled).
+    cost : (n_slices, nt, ns) aggregated cost volume.
+    z : (n_slices,) slice depths, metres.
+    """
+
+    r: np.ndarray
+    depth: np.ndarray
+    colour: np.ndarray
+    confident: np.ndarray
+    cost: np.ndarray
+    z: np.ndarray
+
+
+def slice_depths(frame: FrustumFrame, n: int) -> np.ndarray:
+    """Depths (metres) of ``n`` slice centres, even in the grid's inverse depth ``r``."""
+    r = (np.arange(n) + 0.5) / n
+    return 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
+
+
+def _splat(o, d, colour, totem, frame, z, res, n_tot):
+    """Bilinear splats of every ray at every slice: weights (n_tot, nk, nt, ns) and
+    colour sums (n_tot, nk, nt, ns, C)."""
+    nt, ns = res
+    nk = len(z)
+    C = colour.shape[1]
+    K = frame.K
+    plane = n_tot * nt * ns
+    wsum = np.zeros((nk, plane))
+    csum = np.zeros((nk, C, plane))
+    du = frame.u_range[1] - frame.u_range[0]
+    dv = frame.v_range[1] - frame.v_range[0]
+    dz = np.where(np.abs(d[:, 2]) > 1e-6, d[:, 2], 1e-6)
+    for k in range(nk):              # slices, not rays
+        t = (z[k] - o[:, 2]) / dz
+        X = o + t[:, None] * d
+        u = K[0, 0] * X[:, 0] / z[k] + K[0, 2]
+        v = K[1, 1] * X[:, 1] / z[k] + K[1, 2]
+        fs = (u - frame.u_range[0]) / du * ns - 0.5      # cell-centred coordinates
+        ft = (v - frame.v_range[0]) / dv * nt - 0.5
+        ok = (t > 0) & (fs > -1) & (fs < ns) & (ft > -1) & (ft < nt)
+        fs, ft, tk, ck = fs[ok], ft[ok], totem[ok], colour[ok]
+        i0, j0 = np.floor(fs).astype(np.int64), np.floor(ft).astype(np.int64)
+        a, b = fs - i0, ft - j0
+        idx, wts = [], []
+        for di, dj, wgt in ((0, 0, (1 - a) * (1 - b)), (1, 0, a * (1 - b)),
+                            (0, 1, (1 - a) * b), (1, 1, a * b)):
+            ii, jj = i0 + di, j0 + dj
+            keep = (ii >= 0) & (ii < ns) & (jj >= 0) & (jj < nt)
+            idx.append(((tk * nt + jj) * ns + ii)[keep])
+            wts.append(np.where(keep, wgt, 0.0)[keep])
+        sel = [np.nonzero((i0 + di >= 0) & (i0 + di < ns) & (j0 + dj >= 0)
+                          & (j0 + dj < nt))[0] for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1))]
+        idx = np.concatenate(idx)
+        wts = np.concatenate(wts)
+        cols = ck[np.concatenate(sel)]
+        wsum[k] = np.bincount(idx, wts, plane)
+        for c in range(C):
+            csum[k, c] = np.bincount(idx, wts * cols[:, c], plane)
+    wsum = np.moveaxis(wsum.reshape(nk, n_tot, nt, ns), 1, 0)
+    csum = np.moveaxis(csum.reshape(nk, C, n_tot, nt, ns), (1, 2), (4, 0))
+    return wsum, csum
+
+
+def pull_push(values: np.ndarray, weight: np.ndarray, *, levels: int = 8) -> np.ndarray:
+    """Fill a 2-D map where ``weight`` is 0 from its weighted neighbours (pull-push).
+
+    ``values`` (H, W, C), ``weight`` (H, W) >= 0. Known values are kept where
+    ``weight >= 1``; elsewhere they blend with the coarser levels' estimate.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    w = np.clip(np.asarray(weight, dtype=np.float64), 0.0, None)
+    pyr = [(values * w[..., None], w)]
+    for _ in range(levels):
+        vw, ww = pyr[-1]
+        if min(ww.shape) < 2:
+            break
+        H2, W2 = (ww.shape[0] + 1) // 2, (ww.shape[1] + 1) // 2
+        pad = ((0, 2 * H2 - ww.shape[0]), (0, 2 * W2 - ww.shape[1]))
+        wp = np.pad(ww, pad)
+        vp = np.pad(vw, pad + ((0, 0),))
+        w2 = wp.reshape(H2, 2, W2, 2).sum((1, 3))
+        v2 = vp.reshape(H2, 2, W2, 2, -1).sum((1, 3))
+        s = np.minimum(w2, 1.0) / np.maximum(w2, 1e-12)      # clamp the confidence at 1
+        pyr.append((v2 * s[..., None], w2 * s))
+    vw, ww = pyr[-1]
+    est = vw / np.maximum(ww, 1e-12)[..., None]
+    for vw, ww in reversed(pyr[:-1]):
+        up = np.repeat(np.repeat(est, 2, 0), 2, 1)[:ww.shape[0], :ww.shape[1]]
+        up = ndimage.uniform_filter(up, size=(3, 3, 1), mode="nearest")
+        a = np.minimum(ww, 1.0)[..., None]
+        est = a * vw / np.maximum(ww, 1e-12)[..., None] + (1 - a) * up
+    return est
+
+
+def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
+                sigma: float | None = None, window: int = 3, min_weight: float = 0.3,
+                single_penalty: float = 0.05, median: int = 3) -> SweepResult:
+    """Depth and colour of each grid column from the totems' parallax.
+
+    Parameters
+    ----------
+    o, d : (m, 3) refracted rays leaving the totems (exit point, metres, and unit
+        direction), camera frame.
+    colour : (m, C) colour each ray carries (e.g. sRGB of the radiance).
+    totem : (m,) int, the totem each ray left.
+    frame : the grid frame; the sweep's map covers its ``(s, t)`` range.
+    res : (nt, ns) rows and columns of the map.
+    n_slices : depth slices, even in inverse depth between ``frame.near`` and ``far``.
+    sigma : Gaussian spread of each totem's splats, in cells; None = from the ray
+        density (about 4 rays of a totem inside one sigma disc).
+    window : side of the box filter aggregating the cost (cells).
+    min_weight : a totem "lands" in a cell where its spread splat weight exceeds this.
+    single_penalty : cost where fewer than two totems land.
+    median : side of the median filter on the depth index (0 = none).
+    """
+    o = np.asarray(o, np.float64)
+    d = np.asarray(d, np.float64)
+    colour = np.asarray(colour, np.float64)
+    totem = np.asarray(totem, np.int64)
+    nt, ns = int(res[0]), int(res[1])
+    n_tot = int(totem.max()) + 1 if totem.size else 1
+    z = slice_depths(frame, n_slices)
+    wsum, csum = _splat(o, d, colour, totem, frame, z, (nt, ns), n_tot)
+    if sigma is None:
+        # Rays of one totem per cell at the middle slice -> sigma holding ~4 rays.
+        per_cell = wsum[:, n_slices // 2].sum((1, 2)) / (nt * ns)
+        rho = max(float(np.median(per_cell[per_cell > 0])) if np.any(per_cell > 0)
+                  else 1e-3, 1e-3)
+        sigma = float(np.clip(np.sqrt(4.0 / (np.pi * rho)), 0.5, 4.0))
+    ax = (0, 0, sigma, sigma)
+    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant", truncate=2.5)
+    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant", truncate=2.5)
+    # Normalise so that a cell in a uniformly covered region has weight ~ rays/cell
+    # summed over the disc: landing = weight above min_weight * peak of one ray.
+    peak = 1.0 / (2 * np.pi * sigma ** 2)
+    land = wsum > min_weight * peak
+    mu = csum / np.maximum(wsum, 1e-12)[..., None]
+    n_land = land.sum(0)                                         # (nk, nt, ns)
+    lw = land.astype(np.float64)
+    mean = (lw[..., None] * mu).sum(0) / np.maximum(n_land, 1)[..., None]
+    var = (lw * np.square(mu - mean[None]).sum(-1)).sum(0) / np.maximum(n_land, 1)
+    cost = np.where(n_land >= 2, var, single_penalty)
+    if window > 1:
+        cost = ndimage.uniform_filter(cost, size=(1, window, window), mode="nearest")
+    k_best = np.argmin(cost, axis=0)
+    best = np.take_along_axis(cost, k_best[None], 0)[0]
+    n_best = np.take_along_axis(n_land, k_best[None], 0)[0]
+    confident = (n_best >= 2) & (best < single_penalty)
+    kf = k_best.astype(np.float64)
+    if median > 1:
+        # Median over confident neighbours only: fill the rest first (nearest).
+        if confident.any() and not confident.all():
+            idx = ndimage.distance_transform_edt(~confident, return_distances=False,
+                                                 return_indices=True)
+            kf = kf[tuple(idx)]
+        kf = ndimage.median_filter(kf, size=median, mode="nearest")
+    elif confident.any() and not confident.all():
+        idx = ndimage.distance_transform_edt(~confident, return_distances=False,
+                                             return_indices=True)
+        kf = kf[tuple(idx)]
+    k_int = np.clip(np.round(kf).astype(np.int64), 0, n_slices - 1)
+    # Colour: the landing totems' consensus at the chosen slice.
+    sel = k_int[None, None, ..., None]
+    mean_k = np.take_along_axis(mean, k_int[None, ..., None], 0)[0]
+    n_k = np.take_along_axis(n_land, k_int[None], 0)[0]
+    w_col = np.take_along_axis(wsum, k_int[None, None], 1)[:, 0].sum(0)
+    known = (n_k >= 1).astype(np.float64) * np.minimum(w_col / peak, 1.0)
+    del sel
+    col = pull_push(mean_k, known)
+    r = (kf + 0.5) / n_slices
+    depth = 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
+    return SweepResult(r=r, depth=depth, colour=col, confident=confident, cost=cost, z=z)
