@@ -374,6 +374,20 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     if bar is not None:
         bar.close()
     centers = itg.center_numpy() if learn_pose else initial.copy()
+    pose_accepted = None
+    if learn_pose:
+        # Keep the fitted centres only if they explain the totem pixels better than
+        # the initial ones with the same grid (the photometric term is biased by what
+        # the model leaves out: highlights, inter-reflections).
+        amb_np = np.maximum(np.asarray(ambient, np.float64), 0.0)
+        e_fit = _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam,
+                             jt, observed, refl_np, amb_np)
+        e_init = _photo_error(itg, frame, density, colour, initial, radius, ior, d_cam,
+                              jt, observed, refl_np, amb_np)
+        pose_accepted = bool(e_fit < e_init)
+        history["pose_check"] = [e_init, e_fit]
+        if not pose_accepted:
+            centers = initial.copy()
 
     # ---- outputs
     t0 = time.perf_counter()
@@ -397,6 +411,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         "render_s": t_render,
         "total_s": time.perf_counter() - t_start,
         "n_rays": int(n_rays),
+        "pose_accepted": pose_accepted,
         "n_samples": int(settings.n_samples),
     }
     # Compile time: the first step of each stage compiles new kernels.
@@ -413,6 +428,20 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene))
+
+
+def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, observed,
+                 refl, ambient) -> float:
+    """Mean squared sRGB error of the totem pixels rendered with ``centers``."""
+    import drjit as dr
+
+    itg.setup(frame, density, colour, centers, radius, ior)
+    with dr.suspend_grad():
+        L, valid, *_ = itg.render_totem_rays(d_cam, jt)
+    pred = linear_to_srgb(np.asarray(L).T + refl[:, None] * ambient[None])
+    ok = np.asarray(valid, bool)
+    err = np.square(pred - observed).sum(1)
+    return float(np.where(ok, err, 3.0).mean())
 
 
 def _totem_rays_np(itg, d_cam, jt):
