@@ -11,9 +11,22 @@ Loss = photometric MSE (sRGB)
      + distortion (Mip-NeRF 360) on each ray's weights: the scene is opaque surfaces
      + pose term: ``inverse.outline.outline_loss`` (tangent cone vs mask outline).
 
+The glass also reflects: a totem pixel is modelled as ``T_F C + R_F a``, ``R_F = 1 -
+sqrt(T_F)`` the Fresnel reflectance of its front surface and ``a`` one ambient linear
+colour (fitted; starts at the mean observed radiance). Without it, dark regions seen
+through the totems take the tint of the reflected room (measured: box seed 1 at
+320x240, recon L1 0.078 -> 0.068; envmap seed 1, 0.104 -> 0.090).
+
+Optional (``FitSettings.sweep``, off by default): the grid starts from plane-sweep
+stereo between the totems (:mod:`inverse.sweep`). Measured at 320x240 it helps where
+surfaces are textured (box seed 3: 0.131 -> 0.103) but hurts where a smooth bright
+environment is photo-consistent at every depth (envmap: 0.09 -> 0.14-0.16), so it is
+not the default.
+
 Schedule: coarse to fine (the grid is resampled between stages), Adam
 (``mi.ad.Adam``); the totem centres are frozen for the first part of the steps, then
-fitted jointly (unless ``fixed_pose`` or ``true_pose``).
+fitted jointly (unless ``fixed_pose`` or ``true_pose``); the fitted centres are kept
+only if they render the totem pixels better than the initial ones with the final grid.
 
 The colour grid is coarse in depth (``colour_depth`` slices): a column of the camera
 view shows one surface, and a colour that may vary freely along the depth would let
@@ -54,11 +67,11 @@ class FitSettings:
     n_samples: int = 64
     lr_density: float = 0.3
     lr_colour: float = 0.02
-    lr_pose: float = 2e-4            # metres per step (Adam)
+    lr_pose: float = 5e-5            # metres per step (Adam)
     tv_density: float = 0.01
     tv_colour: float = 1.0
     distortion: float = 1e-2
-    outline: float = 1e-3            # per squared pixel of outline residual
+    outline: float = 1e-2            # per squared pixel of outline residual
     pose_start: float = 0.5          # fraction of all steps before centres move
     density_init: float = -4.0       # raw density (softplus -> 0.018 per 1/100)
     erode_px: int = 1                # mask erosion: drop the blurred rim
@@ -67,7 +80,7 @@ class FitSettings:
     far_factor: float = 6.0
     render_samples: int = 128
     seed: int = 0
-    sweep: bool = True               # initialise the grid by plane-sweep stereo
+    sweep: bool = False              # initialise the grid by plane-sweep stereo (see notes)
     sweep_res: tuple = (60, 80)      # (rows, columns) of the sweep's map
     sweep_slices: int = 64
     surface_density: float = 3.0     # raw density of the swept surface voxels
