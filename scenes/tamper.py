@@ -326,8 +326,9 @@ def _pick_object(src: Source, rng, *, ids=None):
                           "above the totems") + "; try another scene or region")
     if src.region is not None:
         obj = cands[int(np.argmax(weights))]
-    else:
-        obj = cands[int(rng.integers(0, len(cands)))]
+    else:   # a clearly visible one: at least a quarter the size of the largest
+        big = [o for o, w in zip(cands, weights) if w >= 0.25 * max(weights)]
+        obj = big[int(rng.integers(0, len(big)))]
     return obj, ids == obj["id"]
 
 
