@@ -232,6 +232,16 @@ def _print_summary(verb: str, summary: dict) -> None:
 
 # --------------------------------------------------------------------------- parser
 
+def _fit_arguments(v) -> None:
+    """Arguments shared by the verbs that fit: fit and check."""
+    v.add_argument("scene")
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+    v.add_argument("--fixed-pose", action="store_true",
+                   help="keep the totem centres at their initialisation")
+    v.add_argument("--oracle-pose", action="store_true",
+                   help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="totems", description="Physics-based verifier for totem-protected "
                 "photographs: fit the scene seen through glass totems, re-render the "
@@ -269,12 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     v = verb("fit", cmd_fit, "pose initialisation + joint fit of the radiance grid and "
              "the totem centres")
-    v.add_argument("scene")
-    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
-    v.add_argument("--fixed-pose", action="store_true",
-                   help="keep the totem centres at their initialisation")
-    v.add_argument("--oracle-pose", action="store_true",
-                   help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
+    _fit_arguments(v)
 
     v = verb("verify", cmd_verify, "protected region, heatmaps, verdict, metrics")
     v.add_argument("scene")
@@ -282,12 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
 
     v = verb("check", cmd_check, "fit, then verify: the one-shot fit-and-compare")
-    v.add_argument("scene")
-    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
-    v.add_argument("--fixed-pose", action="store_true",
-                   help="keep the totem centres at their initialisation")
-    v.add_argument("--oracle-pose", action="store_true",
-                   help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
+    _fit_arguments(v)
 
     v = verb("bench", cmd_bench, "run check over many scene folders and write the tables")
     v.add_argument("dirs", nargs="+", help="folders holding scene folders")
