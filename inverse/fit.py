@@ -47,6 +47,7 @@ import numpy as np
 from inverse import backend, camera
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from scenes import folder
+from scenes.render import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
 
 FIT_FILES = ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
@@ -118,18 +119,6 @@ def scene_fingerprint(scene: folder.Scene) -> str:
     h.update(np.ascontiguousarray(scene.masks.astype(np.uint8)).tobytes())
     h.update(np.round(np.asarray(scene.K, np.float64), 6).tobytes())
     return h.hexdigest()[:16]
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    """sRGB [0, 1] -> linear (IEC 61966-2-1)."""
-    x = np.asarray(x, dtype=np.float64)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """Linear -> sRGB [0, 1] (clipped)."""
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
 def _dr_linear_to_srgb(x):

@@ -70,9 +70,10 @@ def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
     idx = ray_totem if isinstance(ray_totem, mi.UInt32) else \
         mi.UInt32(np.asarray(ray_totem, dtype=np.uint32))
     R_all = mi.Float(np.atleast_1d(np.asarray(radius, dtype=np.float32)))
-    R = dr.gather(mi.Float, R_all, idx) if dr.width(R_all) > 1 else R_all
+    R = dr.gather(mi.Float, R_all, idx, mode=dr.ReduceMode.Direct) \
+        if dr.width(R_all) > 1 else R_all
 
-    P = dr.gather(mi.Vector3f, C, idx)
+    P = dr.gather(mi.Vector3f, C, idx, mode=dr.ReduceMode.Direct)
     dist = dr.norm(P)
     theta = dr.atan2(dr.norm(dr.cross(d, P)), dr.dot(d, P))   # angle(d_k, P_j), stable
     alpha = dr.asin(R / dist)                                   # tangent cone half-angle
