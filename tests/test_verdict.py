@@ -9,15 +9,18 @@ from verify.report import verify_scene
 from verify_cases import SQUARE, box_mask, make_fit, make_scene, texture, with_square
 
 
-def test_robust_z_by_hand():
-    s = np.array([[1.0, 2.0, 3.0, 4.0, 100.0]])
-    used = np.ones_like(s, bool)
-    z, med, sigma = verdict.robust_z(s, used, floor=0.0)
-    # median 3, |s - 3| = 2 1 0 1 97 -> MAD 1
-    assert med == 3.0 and sigma == pytest.approx(1.4826)
-    assert z[0, 4] == pytest.approx(97 / 1.4826)
-    z, _, sigma = verdict.robust_z(np.full((2, 2), 0.5), np.ones((2, 2), bool), floor=0.01)
-    assert sigma == 0.01 and np.all(z == 0)
+def test_score_is_the_excess_of_the_worst_patches_over_the_median():
+    # 100 patches: 97 at 0.1, three at 0.5 -> top-3 mean 0.5, median 0.1
+    s = np.full((10, 10), 0.1)
+    s[0, :3] = 0.5
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    d = verdict.decide(s, np.ones_like(s), g, threshold=0.3)
+    assert d.median == pytest.approx(0.1) and d.score == pytest.approx(0.4)
+    assert d.verdict == "inconsistent"
+    assert d.drivers and all(x["row"] == 0 and x["col"] < 3 for x in d.drivers)
+    assert all(x["excess"] == pytest.approx(0.4) for x in d.drivers)
+    d = verdict.decide(s, np.ones_like(s), g, threshold=0.45)
+    assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.4)
 
 
 def test_noisy_recon_is_consistent():
@@ -46,7 +49,7 @@ def test_coloured_square_is_inconsistent_and_named():
     for d in rep.drivers:
         bx0, by0, bx1, by1 = d["box"]
         assert bx0 < x1 and bx1 > x0 and by0 < y1 and by1 > y0     # overlaps the square
-        assert d["z"] > verdict.VERDICT_THRESHOLD
+        assert d["excess"] > verdict.VERDICT_THRESHOLD
         assert rep.grid.box(d["row"], d["col"]) == d["box"]
     assert rep.metrics["patch_ap_L1"] > 0.9 and rep.metrics["patch_ap_SSIM"] > 0.9
 

@@ -21,7 +21,7 @@ RADIUS = 0.0987654          # distinctive digits: the tests look for them in the
 IOR = 1.5432109
 CENTERS = np.array([[-0.40, 0.35, 1.5], [0.40, 0.35, 1.5]])
 PROTECT_BOX = (40, 20, 280, 160)      # x0, y0, x1, y1 (end exclusive) of the seen area
-SQUARE = (150, 60, 190, 100)          # x0, y0, x1, y1 of the coloured square
+SQUARE = (136, 56, 200, 120)         # x0, y0, x1, y1 of the coloured square (one patch)
 
 
 def texture(seed: int = 0) -> np.ndarray:
