@@ -102,7 +102,7 @@ class FrustumFrame:
 
 
 def frame_for_scene(K, size, centers, radius, *, margin: float = 0.15,
-                    near_factor: float = 0.5, far_factor: float = 6.0) -> FrustumFrame:
+                    near_factor: float = 0.5, far_factor: float = 1000.0) -> FrustumFrame:
     """A grid frame around the camera view that holds the totems and what they see.
 
     ``near`` is ``near_factor`` times the nearest totem front (``z - R``), ``far`` is
