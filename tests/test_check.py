@@ -1,0 +1,72 @@
+"""`totems verify` / `totems check` end to end on a rendered scene, as a user runs them.
+
+An untouched 320 x 240 box scene is consistent (exit 0); the same photo with a large
+colour patch pasted above the totems is inconsistent (exit 1) and the report names
+patches on it; a fit made from another photo is refused (exit 2, one line).
+"""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from scenes import folder
+from scenes.make import make_scene
+from test_cli import assert_one_line_error, totems
+
+SQUARE = (128, 56, 192, 120)      # x0, y0, x1, y1: 64 px, above the totems, mid-image
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    return make_scene(tmp_path_factory.mktemp("check") / "box-1", preset="box", seed=1,
+                      size=(320, 240), spp=16)
+
+
+@pytest.fixture(scope="module")
+def tampered(scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("check") / "box-1-square"
+    shutil.copytree(scene, out)
+    image = folder.read_image(out / "image.png")
+    x0, y0, x1, y1 = SQUARE
+    image[y0:y1, x0:x1] = (1.0, 0.0, 1.0)
+    mask = np.zeros(image.shape[:2], bool)
+    mask[y0:y1, x0:x1] = True
+    folder.write_image(out / "image.png", image)
+    folder.write_image(out / "manip_mask.png", mask)
+    return out
+
+
+def test_verify_without_a_fit_fits_and_passes_the_untouched_photo(scene, tmp_path):
+    out = tmp_path / "out"
+    proc = totems("verify", scene, "--out", out)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (out / "fit" / "fit.json").is_file()
+    report = json.loads((out / "verify" / "report.json").read_text())
+    assert report["verdict"] == "consistent"
+    assert report["score"] <= report["threshold"]
+    assert 0.1 < report["protected_fraction"] <= 1.0
+
+
+def test_a_pasted_colour_patch_is_inconsistent_and_named(tampered, tmp_path):
+    out = tmp_path / "out"
+    proc = totems("check", tampered, "--out", out)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((out / "verify" / "report.json").read_text())
+    assert report["verdict"] == "inconsistent" and report["score"] > report["threshold"]
+    x0, y0, x1, y1 = SQUARE
+    assert report["drivers"]
+    for d in report["drivers"]:
+        bx0, by0, bx1, by1 = d["box"]
+        assert bx0 < x1 and bx1 > x0 and by0 < y1 and by1 > y0, d
+    assert report["metrics"]["patch_ap_L1"] > 0.8
+
+
+def test_a_fit_of_another_photo_is_refused(scene, tampered, tmp_path):
+    out = tmp_path / "out"
+    assert totems("fit", scene, "--out", out).returncode == 0
+    line = assert_one_line_error(totems("verify", tampered, "--fit", out / "fit"))
+    assert "another scene" in line
