@@ -28,8 +28,8 @@ def build(out: Path, *, presets, seeds, size, kinds, totem_counts, spp=None) -> 
                 base = out / name
                 if not base.exists():
                     t0 = time.perf_counter()
-                    make_scene(base, preset=preset, seed=seed, size=size, n_totems=n,
-                               spp=spp)
+                    kw = {} if spp is None else {"spp": spp}
+                    make_scene(base, preset=preset, seed=seed, size=size, n_totems=n, **kw)
                     print(f"made {name} in {time.perf_counter() - t0:.0f} s", flush=True)
                 made.append(base)
                 if n != 4:
