@@ -24,6 +24,17 @@ def run(*args) -> int:
     return subprocess.run(cmd).returncode
 
 
+def _verdict(scene: Path) -> str:
+    """'consistent (score 0.11)' from the scene's report.json, or '' when missing."""
+    import json
+
+    path = scene / "totems-out/verify/report.json"
+    if not path.is_file():
+        return ""
+    r = json.loads(path.read_text())
+    return f"{r['verdict']} (score {r['score']:.2f} / {r['threshold']:.2f})"
+
+
 def picture(untouched: Path, tampered: Path, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -32,10 +43,12 @@ def picture(untouched: Path, tampered: Path, out: Path) -> None:
 
     panels = [(untouched / "image.png", "untouched photo"),
               (untouched / "totems-out/verify/recon.png", "re-rendered from the totems"),
-              (untouched / "totems-out/verify/L1/heatmap_overlay.png", "untouched: heatmap"),
+              (untouched / "totems-out/verify/L1/heatmap_overlay.png",
+               "untouched: " + _verdict(untouched)),
               (tampered / "image.png", "tampered photo"),
               (tampered / "manip_mask.png", "what was changed"),
-              (tampered / "totems-out/verify/L1/heatmap_overlay.png", "tampered: heatmap")]
+              (tampered / "totems-out/verify/L1/heatmap_overlay.png",
+               "tampered: " + _verdict(tampered))]
     fig, axes = plt.subplots(2, 3, figsize=(12, 6.4))
     for ax, (path, title) in zip(axes.ravel(), panels):
         if path.is_file():
