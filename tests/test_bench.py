@@ -1,0 +1,47 @@
+"""`totems bench`: runs check over every scene, keeps going past a broken one, writes
+bench.json, bench.csv and bench.md."""
+
+import csv
+import json
+import shutil
+
+import pytest
+
+from scenes.make import make_scene
+from scenes.tamper import tamper
+from test_cli import totems
+
+pytestmark = pytest.mark.slow
+
+
+def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
+    root = tmp_path / "set"
+    scene = make_scene(root / "box-1", preset="box", seed=1, size=(160, 120), spp=4)
+    tamper(scene, root / "box-1-color", kind="color", seed=1)
+    broken = root / "box-1-broken"
+    shutil.copytree(scene, broken)
+    (broken / "totems.json").write_text(json.dumps({"radius": -0.1, "ior": 1.52}))
+
+    out = tmp_path / "bench"
+    proc = totems("bench", root, "--out", out, "--no-table1")
+    assert proc.returncode == 0, proc.stderr
+    for name in ("bench.json", "bench.csv", "bench.md"):
+        assert (out / name).is_file()
+
+    bench = json.loads((out / "bench.json").read_text())
+    runs = {r["name"]: r for r in bench["runs"]}
+    assert set(runs) == {"box-1", "box-1-color", "box-1-broken"}
+    assert runs["box-1-broken"]["status"] == "failed"
+    assert "radius" in runs["box-1-broken"]["error"]
+    for name in ("box-1", "box-1-color"):
+        r = runs[name]
+        assert r["status"] == "ok" and r["verdict"] in ("consistent", "inconsistent")
+        assert r["metrics"]["recon_L1"] is not None
+    assert runs["box-1-color"]["kind"] == "color"
+    assert runs["box-1-color"]["metrics"]["patch_ap_L1"] is not None
+
+    rows = list(csv.DictReader((out / "bench.csv").open()))
+    assert {r["name"]: r["status"] for r in rows} == {
+        "box-1": "ok", "box-1-color": "ok", "box-1-broken": "failed"}
+    md = (out / "bench.md").read_text()
+    assert "Failed runs" in md and "box-1-broken" in md and "| color |" in md
