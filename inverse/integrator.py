@@ -33,7 +33,9 @@ Parameters (``mi.traverse``): ``density`` (nr, nt, ns, 1) raw density before the
 softplus; ``colour`` (nr', nt', ns', 3) linear RGB; ``centers`` (3 n floats, metres,
 camera frame; x of every totem, then y, then z). Construction options (props):
 ``n_samples`` (int, default 64): samples per ray; ``totems`` (bool, default False):
-refract camera rays through the totems in :meth:`sample`.
+refract camera rays through the totems in :meth:`sample`; ``drop_top_exits`` (bool,
+default False): mark totem rays that leave through the top face invalid (see
+:func:`leaves_through_top`).
 """
 
 from __future__ import annotations
@@ -133,6 +135,13 @@ def ray_segment(fc: FrameConstants, o, d):
     return mi.Point3f(g0), mi.Point3f(g1), valid
 
 
+def leaves_through_top(g1) -> mi.Bool:
+    """Segments that end on the grid's top face (``t = 0``, above the camera view)
+    before its far plane: totem rays going to what the camera cannot see (ceiling,
+    lights, sky), whose backdrop would paint the top rows of the view."""
+    return (g1.y <= 1e-4) & (g1.z < 1.0 - 1e-4)
+
+
 def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
           jitter=None, delta_scale=(DELTA_SCALE, DELTA_SCALE, DELTA_SCALE)):
     """Volume rendering of segments ``g0 -> g1`` given per lane (blocks of ``n``).
@@ -217,6 +226,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         self.centers = None
         self.radius = None
         self.ior = None
+        self.drop_top_exits = bool(props.get("drop_top_exits", False))
 
     # ------------------------------------------------------------------ parameters
 
@@ -296,6 +306,8 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         o_out, d_out, T_F, ok = totem_rays(mi.Point3f(0.0), d, P, R, eta)
         g0, g1, inside = ray_segment(self.fc, o_out, d_out)
         valid = ok & inside
+        if self.drop_top_exits:
+            valid &= ~leaves_through_top(g1)
         dr.eval(g0, g1, T_F, valid)
         # Per ray -> per lane: dr.repeat's adjoint is a block sum (no atomics).
         g0_l = mi.Point3f(*[dr.repeat(g0[a], n) for a in range(3)])

@@ -261,3 +261,21 @@ def test_bad_input(small_scene):
     with pytest.raises(BadInput):
         fit.fit_scene(dataclasses.replace(scene, radius=np.full(4, 5.0)),
                       true_pose=truth)
+
+
+def test_rays_leaving_through_the_top_face_are_told_apart():
+    from inverse.integrator import FrameConstants, leaves_through_top, ray_segment
+
+    frame = frame_for_scene(K, (W, H), CENTERS, RADIUS)
+    fc = FrameConstants(frame)
+    o = mi.Point3f(0.0, 0.0, 2.0)                       # inside the frustum, metres
+    up, ahead, down = [0.0, -1.0, 0.2], [0.0, 0.0, 1.0], [0.0, 1.0, 0.2]   # +y is down
+    d = mi.Vector3f(*[np.array(v, np.float32) for v in zip(up, ahead, down)])
+    d = dr.normalize(d)
+    g0, g1, valid = ray_segment(fc, o, d)
+    assert np.all(np.asarray(valid))
+    g1y, g1r = np.asarray(g1.y), np.asarray(g1.z)
+    assert g1y[0] == pytest.approx(0.0, abs=1e-4) and g1r[0] < 1.0     # top face
+    assert g1r[1] == pytest.approx(1.0, abs=1e-4)                       # far plane
+    assert g1y[2] == pytest.approx(1.0, abs=1e-4)                       # bottom face
+    assert np.asarray(leaves_through_top(g1)).tolist() == [True, False, False]
