@@ -10,6 +10,7 @@ totems alone, and the inconsistency heatmap over the photo.
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import shutil
 import subprocess
@@ -25,9 +26,7 @@ def run(*args) -> int:
 
 
 def _verdict(scene: Path) -> str:
-    """'consistent (score 0.11)' from the scene's report.json, or '' when missing."""
-    import json
-
+    """'consistent (score 0.11 / 0.18)' from the scene's report.json, or ''."""
     path = scene / "totems-out/verify/report.json"
     if not path.is_file():
         return ""

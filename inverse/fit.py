@@ -359,8 +359,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
             L, valid, w, m, *_ = itg.render_totem_rays(d_cam, jt)
             if settings.reflection:
                 amb = opt["ambient"]
-                L = L + refl_dr * mi.Color3f(*[dr.gather(mi.Float, amb, i, mode=dr.ReduceMode.Direct)
-                                                for i in range(3)])
+                L = L + refl_dr * mi.Color3f(*[
+                    dr.gather(mi.Float, amb, i, mode=dr.ReduceMode.Direct) for i in range(3)])
             pred = mi.Color3f(*[_dr_linear_to_srgb(L[i]) for i in range(3)])
             vmask = dr.select(valid, 1.0, 0.0)
             diff = pred - obs_dr
@@ -470,17 +470,7 @@ def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, o
 def _totem_rays_np(itg, d_cam, jt):
     """Refracted rays at the integrator's centres, numpy: exit points (m, 3) metres,
     unit directions (m, 3), Fresnel transmittance (m,), valid (m,)."""
-    import mitsuba as mi
-
-    from inverse.sphere import totem_rays
-
-    j = np.asarray(jt, np.int64)
-    c = itg.center_numpy()
-    P = mi.Point3f(*[mi.Float(c[j, a].astype(np.float32)) for a in range(3)])
-    R = mi.Float(np.asarray(itg.radius, np.float32)[j])
-    eta = mi.Float(np.asarray(itg.ior, np.float32)[j])
-    d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
-    o_out, d_out, T_F, ok = totem_rays(mi.Point3f(0.0), d, P, R, eta)
+    o_out, d_out, T_F, ok = itg.refract(d_cam, jt)
     return (np.asarray(o_out, np.float64).T.reshape(-1, 3),
             np.asarray(d_out, np.float64).T.reshape(-1, 3),
             np.asarray(T_F, np.float64).reshape(-1), np.asarray(ok, bool).reshape(-1))

@@ -204,7 +204,8 @@ def select_center(centers, index):
     P = [mi.Float(0.0)] * 3
     for j in range(n_tot):
         is_j = index == j
-        P = [dr.select(is_j, dr.gather(mi.Float, centers[a], j, mode=dr.ReduceMode.Direct), P[a]) for a in range(3)]
+        P = [dr.select(is_j, dr.gather(mi.Float, centers[a], j, mode=dr.ReduceMode.Direct),
+                       P[a]) for a in range(3)]
     return mi.Point3f(*P)
 
 
@@ -281,6 +282,22 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         g1 = mi.Point3f(s, t, 1.0)
         return march(self.density, self.colour, g0, g1, n, jitter=jitter)
 
+    def refract(self, d_cam, totem_index):
+        """Camera rays through totem pixels, refracted out of their sphere.
+
+        ``d_cam`` (m, 3) numpy unit camera-frame directions, ``totem_index`` (m,) ints.
+        Returns the exit points (mi.Point3f, metres), exit directions, Fresnel
+        transmittance ``T_F`` and validity per ray (:func:`inverse.sphere.totem_rays`),
+        differentiable in the centres.
+        """
+        d_cam = np.asarray(d_cam, np.float32)
+        d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
+        idx = mi.UInt32(np.asarray(totem_index, np.uint32))
+        P = select_center(self.center_array(), idx)
+        R = dr.gather(mi.Float, self.radius, idx)
+        eta = dr.gather(mi.Float, self.ior, idx)
+        return totem_rays(mi.Point3f(0.0), d, P, R, eta)
+
     def render_totem_rays(self, d_cam, totem_index, *, n=None, jitter=None):
         """Totem pixels: camera rays refracted through their totem, then marched.
 
@@ -297,13 +314,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         g0, g1 : per-lane segment ends (unit coordinates).
         """
         n = n or self.n_samples
-        d_cam = np.asarray(d_cam, np.float32)
-        d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
-        idx = mi.UInt32(np.asarray(totem_index, np.uint32))
-        P = select_center(self.center_array(), idx)
-        R = dr.gather(mi.Float, self.radius, idx)
-        eta = dr.gather(mi.Float, self.ior, idx)
-        o_out, d_out, T_F, ok = totem_rays(mi.Point3f(0.0), d, P, R, eta)
+        o_out, d_out, T_F, ok = self.refract(d_cam, totem_index)
         g0, g1, inside = ray_segment(self.fc, o_out, d_out)
         valid = ok & inside
         if self.drop_top_exits:

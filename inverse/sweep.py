@@ -86,15 +86,14 @@ def _splat(o, d, colour, totem, frame, z, res, n_tot):
         fs, ft, tk, ck = fs[ok], ft[ok], totem[ok], colour[ok]
         i0, j0 = np.floor(fs).astype(np.int64), np.floor(ft).astype(np.int64)
         a, b = fs - i0, ft - j0
-        idx, wts = [], []
+        idx, wts, sel = [], [], []
         for di, dj, wgt in ((0, 0, (1 - a) * (1 - b)), (1, 0, a * (1 - b)),
                             (0, 1, (1 - a) * b), (1, 1, a * b)):
             ii, jj = i0 + di, j0 + dj
             keep = (ii >= 0) & (ii < ns) & (jj >= 0) & (jj < nt)
             idx.append(((tk * nt + jj) * ns + ii)[keep])
-            wts.append(np.where(keep, wgt, 0.0)[keep])
-        sel = [np.nonzero((i0 + di >= 0) & (i0 + di < ns) & (j0 + dj >= 0)
-                          & (j0 + dj < nt))[0] for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1))]
+            wts.append(wgt[keep])
+            sel.append(np.nonzero(keep)[0])
         idx = np.concatenate(idx)
         wts = np.concatenate(wts)
         cols = ck[np.concatenate(sel)]
