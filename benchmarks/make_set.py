@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from scenes.errors import BadInput
 from scenes.make import make_scene
 from scenes.tamper import KINDS, tamper
 
@@ -37,7 +38,11 @@ def build(out: Path, *, presets, seeds, size, kinds, totem_counts, spp=None) -> 
                 for kind in kinds:
                     dst = out / f"{name}-{kind}"
                     if not dst.exists():
-                        tamper(base, dst, kind=kind, seed=seed)
+                        try:
+                            tamper(base, dst, kind=kind, seed=seed)
+                        except BadInput as e:   # e.g. no object fit to remove: skip it
+                            print(f"skipped {dst.name}: {e}", flush=True)
+                            continue
                         print(f"tampered {dst.name}", flush=True)
                     made.append(dst)
     return made

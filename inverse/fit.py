@@ -133,11 +133,23 @@ class FitResult:
 # --------------------------------------------------------------------------- helpers
 
 def scene_fingerprint(scene: folder.Scene) -> str:
-    """Hash of the photo, the masks and K: a fit made from another scene differs."""
+    """Hash of what a fit depends on: totem pixels, masks, K, key and any initial pose.
+
+    The fit reads the photo only inside the totem masks, so a photo edited elsewhere (the
+    forger's case) shares the fit of the original, while a fit of another scene, of a
+    photo whose totem pixels changed, or made with another key, differs. The key enters
+    only through a hash, so the fingerprint can be shared.
+    """
+    masks = np.asarray(scene.masks, bool)
+    totem_px = np.asarray(scene.image)[masks.any(0)]
     h = hashlib.sha256()
-    h.update(np.ascontiguousarray(np.round(scene.image * 255).astype(np.uint8)).tobytes())
-    h.update(np.ascontiguousarray(scene.masks.astype(np.uint8)).tobytes())
+    h.update(np.ascontiguousarray(np.round(totem_px * 255).astype(np.uint8)).tobytes())
+    h.update(np.packbits(masks).tobytes())
+    h.update(repr(masks.shape).encode())
     h.update(np.round(np.asarray(scene.K, np.float64), 6).tobytes())
+    h.update(folder.key_fingerprint(scene.radius, scene.ior).encode())
+    if scene.initial_pose is not None:      # a given initial pose replaces the masks' one
+        h.update(np.round(np.asarray(scene.initial_pose, np.float64), 6).tobytes())
     return h.hexdigest()[:16]
 
 

@@ -1,5 +1,6 @@
-"""`totems bench`: runs check over every scene, keeps going past a broken one, writes
-bench.json, bench.csv and bench.md."""
+"""`totems bench`: runs check over every scene, keeps going past a broken one, fits a
+photo and its copies edited outside the totems once, writes bench.json, bench.csv and
+bench.md."""
 
 import csv
 import json
@@ -38,6 +39,9 @@ def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
         assert r["status"] == "ok" and r["verdict"] in ("consistent", "inconsistent")
         assert r["metrics"]["recon_L1"] is not None
     assert runs["box-1-color"]["kind"] == "color"
+    # The colour edit leaves the totems alone: it reuses box-1's fit instead of fitting.
+    assert runs["box-1-color"]["fit_from"] == "box-1" and "fit_from" not in runs["box-1"]
+    assert bench["fits"] == 2
     assert runs["box-1-color"]["metrics"]["patch_ap_L1"] is not None
 
     rows = list(csv.DictReader((out / "bench.csv").open()))

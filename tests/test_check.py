@@ -2,7 +2,9 @@
 
 An untouched 320 x 240 box scene is consistent (exit 0); the same photo with a large
 colour patch pasted above the totems is inconsistent (exit 1) and the report names
-patches on it; a fit made from another photo is refused (exit 2, one line).
+patches on it. A fit is tied to the totem pixels, masks, camera and key: the untouched
+photo's fit serves a copy edited outside the totems, and is refused (exit 2, one line)
+for a photo whose totem pixels changed.
 """
 
 import json
@@ -40,9 +42,15 @@ def tampered(scene, tmp_path_factory):
     return out
 
 
-def test_verify_without_a_fit_fits_and_passes_the_untouched_photo(scene, tmp_path):
-    out = tmp_path / "out"
-    proc = totems("verify", scene, "--out", out)
+@pytest.fixture(scope="module")
+def verified(scene, tmp_path_factory):
+    """``totems verify`` with no fit yet: it fits, then verifies (out folder, process)."""
+    out = tmp_path_factory.mktemp("check") / "out"
+    return out, totems("verify", scene, "--out", out)
+
+
+def test_verify_without_a_fit_fits_and_passes_the_untouched_photo(verified):
+    out, proc = verified
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert (out / "fit" / "fit.json").is_file()
     report = json.loads((out / "verify" / "report.json").read_text())
@@ -65,8 +73,18 @@ def test_a_pasted_colour_patch_is_inconsistent_and_named(tampered, tmp_path):
     assert report["metrics"]["patch_ap_L1"] > 0.8
 
 
-def test_a_fit_of_another_photo_is_refused(scene, tampered, tmp_path):
-    out = tmp_path / "out"
-    assert totems("fit", scene, "--out", out).returncode == 0
-    line = assert_one_line_error(totems("verify", tampered, "--fit", out / "fit"))
+def test_the_fit_serves_edits_outside_the_totems_only(verified, scene, tampered,
+                                                      tmp_path):
+    fit_dir = verified[0] / "fit"
+    proc = totems("verify", tampered, "--fit", fit_dir, "--out", tmp_path / "a")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+
+    inside = tmp_path / "totem-edited"
+    shutil.copytree(scene, inside)
+    image = folder.read_image(inside / "image.png")
+    v, u = np.nonzero(folder.read_mask(next((inside / "totem_masks").glob("*.png"))))
+    image[v[len(v) // 2], u[len(u) // 2]] = 1.0 - image[v[len(v) // 2], u[len(u) // 2]]
+    folder.write_image(inside / "image.png", image)
+    line = assert_one_line_error(totems("verify", inside, "--fit", fit_dir,
+                                        "--out", tmp_path / "b"))
     assert "another scene" in line

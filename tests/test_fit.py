@@ -230,7 +230,14 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert back.scene_fingerprint == fit.scene_fingerprint(scene)
     recon2, _ = fit.render_grid(back.grid, scene.size, n=32)
     assert np.abs(recon2 - r.recon).max() < 1e-3
+    # The fingerprint follows what the fit reads: the totem pixels and the key.
+    outside = scene.image.copy()
+    outside[~scene.masks.any(0)] = 0.5
+    assert fit.scene_fingerprint(dataclasses.replace(scene, image=outside)) \
+        == back.scene_fingerprint
     assert fit.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
+        != back.scene_fingerprint
+    assert fit.scene_fingerprint(dataclasses.replace(scene, ior=scene.ior + 0.01)) \
         != back.scene_fingerprint
 
 

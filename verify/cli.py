@@ -142,8 +142,8 @@ def cmd_verify(args) -> dict:
     if args.fit or (fit_dir / "fit.json").is_file():
         fit = load_fit(fit_dir)
         if fit.scene_fingerprint != scene_fingerprint(scene):
-            raise BadInput(f"the fit in {fit_dir} was made from another scene or photo; "
-                           f"run `totems fit {args.scene}` or drop --fit")
+            raise BadInput(f"the fit in {fit_dir} was made from another scene, totem "
+                           f"pixels or key; run `totems fit {args.scene}` or drop --fit")
         return _verify(args, scene, fit)
     t0 = time.perf_counter()
     fit, _ = _fit(args, scene)
@@ -163,6 +163,7 @@ def cmd_bench(args) -> dict:
     from verify.bench import run_bench
 
     bench = run_bench(args.dirs, args.out, jobs=args.jobs, table1=not args.no_table1,
+                      refit=args.refit,
                       progress=_progress(args))
     return {"bench": str(args.out), "scenes": bench["scenes"],
             "failed": len(bench["summary"]["failed"]), "wall_s": bench["wall_s"]}
@@ -295,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--jobs", type=_positive(int), default=1, help="scenes run at once")
     v.add_argument("--no-table1", action="store_true",
                    help="skip the initial-pose and oracle-pose fits of untouched scenes")
+    v.add_argument("--refit", action="store_true",
+                   help="fit every scene, even one whose totem pixels another's fit serves")
 
     v = verb("calib", cmd_calib, "camera calibration from checkerboard photos")
     v.add_argument("images", nargs="+", help="photos of a printed checkerboard")
