@@ -42,6 +42,9 @@ def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
     # The colour edit leaves the totems alone: it reuses box-1's fit instead of fitting.
     assert runs["box-1-color"]["fit_from"] == "box-1" and "fit_from" not in runs["box-1"]
     assert bench["fits"] == 2
+    stages = bench["summary"]["time_per_stage_s"]
+    assert "verify" in stages and all(k in ("fit", "verify") or "_s" in k
+                                      for k in stages)      # times only, no ray counts
     assert runs["box-1-color"]["metrics"]["patch_ap_L1"] is not None
 
     rows = list(csv.DictReader((out / "bench.csv").open()))

@@ -230,7 +230,8 @@ def summarise(runs: list[dict]) -> dict:
     stages = {}
     for r in joint:
         for k, v in (r.get("timing_s") or {}).items():
-            if isinstance(v, (int, float)):
+            if isinstance(v, (int, float)) and (k in ("fit", "verify") or k.endswith("_s")
+                                                  or "_s_" in k):   # times, not counts
                 stages.setdefault(k, []).append(v)
     return {
         "table1": table1, "table2": table2,
@@ -342,6 +343,10 @@ def write_plots(summary: dict, out: Path) -> None:
         fig, ax = plt.subplots(figsize=(6, 3))
         ax.bar(x - 0.2, [t2[k]["ap_L1"] or 0 for k in kinds], 0.4, label="L1")
         ax.bar(x + 0.2, [t2[k]["ap_SSIM"] or 0 for k in kinds], 0.4, label="SSIM")
+        paper = [(i, PAPER_TABLE2[k][0]) for i, k in enumerate(kinds) if k in PAPER_TABLE2]
+        if paper:
+            ax.plot([i - 0.2 for i, _ in paper], [v for _, v in paper], "k_", ms=22,
+                    mew=2, label="paper (L1)")
         ax.set_xticks(x, kinds)
         ax.set_ylim(0, 1)
         ax.set_ylabel("patch AP")

@@ -45,7 +45,12 @@ its untouched photo already is; both missed on envmap seed 3, whose untouched sc
 already 0.147); inpainting and the perfect forger's removal stay at the untouched level
 (not caught). After the fit left out totem rays that exit through the grid's top face,
 the same untouched photos of box seeds 1-3 and envmap seed 3 scored 0.084-0.143 (no false
-alarm). Rerun ``benchmarks/`` and recalibrate when the fit changes.
+alarm). On the standard set (box and envmap seeds 1-5, 640 x 480, 68 scenes): untouched
+0.081-0.143 except envmap seed 4 at 0.200 (two patches at the left edge of the protected
+region, floor seen at grazing angles: 1 false alarm in 10); colour patches flagged in 6 of
+10, splices 8 of 10. Left at 0.18 rather than raised to the set's own maximum: the set
+is the test, not the calibration. Rerun ``benchmarks/`` and recalibrate when the fit
+changes.
 """
 
 TOP_K_FRACTION = 0.01
