@@ -49,13 +49,24 @@ def test_fewer_totem_pixels_keep_the_region():
     assert density_of_few < 0.1
 
 
-def test_two_clusters_give_their_convex_hull():
+def test_two_clusters_stay_apart_unless_the_paper_hull_is_asked():
     a, b = (20, 20, 80, 80), (220, 100, 300, 160)
     pts = np.concatenate([points_in_box(a, 3000), points_in_box(b, 3000, seed=1)])
     R = region.protected_region(pts, K, (W, H), 6000)
     assert R[50, 50] and R[130, 260]
-    assert R[90, 150]                      # between the clusters, on the segment
-    assert not R[150, 40] and not R[10, 300]   # off the hull
+    assert not R[90, 150]                  # between the clusters: not seen, not protected
+    hull = region.protected_region(pts, K, (W, H), 6000, shape="hull")
+    assert hull[50, 50] and hull[130, 260]
+    assert hull[90, 150]                   # between the clusters, on the segment
+    assert not hull[150, 40] and not hull[10, 300]   # off the hull
+
+
+def test_a_ring_of_points_protects_its_inside():
+    # holes are filled: a region seen all around is protected inside too
+    ring = np.concatenate([points_in_box(b, 1500, seed=i) for i, b in enumerate(
+        [(60, 40, 260, 70), (60, 170, 260, 200), (60, 70, 90, 170), (230, 70, 260, 170)])])
+    R = region.protected_region(ring, K, (W, H), len(ring))
+    assert R[120, 160] and not R[10, 10]
 
 
 def test_empty_region_is_bad_input():

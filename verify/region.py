@@ -23,6 +23,16 @@ dense boxes*, not of all points. With ``density = 0.5`` the points spread evenly
 image protect all of it, and points concentrated on a quarter of the image protect that
 quarter.
 
+The region is the set of well-seen pixels closed over a box with its holes filled, not
+the paper's convex hull (kept as ``shape="hull"``): the hull also takes in what lies between well-seen
+parts, and the verdict then judged patches the totems hardly see. Measured on the
+standard set (box and envmap seeds 1-5, 640 x 480, the same fits, 68 photos): the
+untouched photos' verdict scores 0.081-0.200 with the hull (envmap seed 4 a false alarm,
+its worst patches at the hull's left edge) and 0.052-0.141 filled; patch AP (L1) colour
+0.61 -> 0.62, splice 0.71 -> 0.76, inpaint 0.15 -> 0.16, removal 0.16 -> 0.18, insertion
+0.24 -> 0.25, shift 0.27 -> 0.28; the region covers 74 % of the photo instead of 82 %.
+Three shifts on envmap scenes that the hull flagged (0.26-0.31) score 0.05-0.17 filled.
+
 References
 ----------
 Ma et al., "Totems: Physical Objects for Verifying Visual Integrity", ECCV 2022, sec. 4.3
@@ -70,7 +80,7 @@ def project_counts(points: np.ndarray, K: np.ndarray, size: tuple[int, int]) -> 
 
 def protected_region(points: np.ndarray, K: np.ndarray, size: tuple[int, int],
                      n_totem_pixels: int | None = None, *, box: int = BOX_PX,
-                     density: float = DENSITY) -> np.ndarray:
+                     density: float = DENSITY, shape: str = "filled") -> np.ndarray:
     """The protected region of the camera view (paper sec. 4.3, relative threshold).
 
     Parameters
@@ -83,11 +93,13 @@ def protected_region(points: np.ndarray, K: np.ndarray, size: tuple[int, int],
         points that land in the image, see the module docstring).
     box : box-filter width in pixels.
     density : fraction of the image's mean point density a box must reach.
+    shape : which pixels that hold a point and lie in a box that passes become the
+        region: "filled" (default) closes them over a box and fills holes (:func:`filled`);
+        "hull" takes their convex hull, as the paper.
 
     Returns
     -------
-    (H, W) bool, the convex hull of the pixels that hold a point and lie in a box
-    that passes the threshold.
+    (H, W) bool, the protected region.
 
     Raises
     ------
@@ -109,13 +121,23 @@ def protected_region(points: np.ndarray, K: np.ndarray, size: tuple[int, int],
     # mean count per pixel in a box x box window centred on each pixel (zeros outside)
     rho = ndimage.uniform_filter(counts, size=box, mode="constant", cval=0.0)
     dense = rho >= density * rho0 * (1.0 - 1e-9)
+    if shape not in ("filled", "hull"):
+        raise ValueError(f"shape must be 'filled' or 'hull', got {shape!r}")
     # a pixel is kept when it holds a point and lies inside a dense box
     in_dense_box = ndimage.maximum_filter(dense, size=box, mode="constant", cval=False)
     kept = in_dense_box & (counts > 0)
     if not kept.any():
         raise BadInput("the protected region is empty: the totems' points are too sparse "
                        "in the photo (fit failed or totems see outside the view)")
-    return hull(kept)
+    return hull(kept) if shape == "hull" else filled(kept, box)
+
+
+def filled(kept: np.ndarray, box: int = BOX_PX) -> np.ndarray:
+    """The True pixels of ``kept`` (H, W) bool closed over ``box`` pixels (gaps narrower
+    than a box bridged; the image border does not erode) and with holes filled."""
+    grown = ndimage.maximum_filter(kept, size=box, mode="constant", cval=False)
+    closed = ndimage.minimum_filter(grown, size=box, mode="constant", cval=True)
+    return ndimage.binary_fill_holes(closed)
 
 
 def hull(kept: np.ndarray) -> np.ndarray:
