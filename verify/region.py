@@ -18,14 +18,14 @@ totem pixels (totems nearer the camera) doubles both the counts and the threshol
 region stays the same. A box whose density reaches ``density`` times the average of the
 image is "seen well enough by the totems". Points far outside the others (isolated
 mis-reconstructions) do not pass, because a box holding one or two points is far below
-the threshold; they are also why the region is the hull of the *counted pixels inside
-dense boxes*, not of all points. With ``density = 0.5`` the points spread evenly over the
+the threshold; they are also why the region is built from the *counted pixels inside
+dense boxes*, not from all points. With ``density = 0.5`` the points spread evenly over the
 image protect all of it, and points concentrated on a quarter of the image protect that
 quarter.
 
-The region is the set of well-seen pixels closed over a box with its holes filled, not
-the paper's convex hull (kept as ``shape="hull"``): the hull also takes in what lies between well-seen
-parts, and the verdict then judged patches the totems hardly see. Measured on the
+The region is the set of those pixels closed over a box with its holes filled, not the
+paper's convex hull (kept as ``shape="hull"``): the hull also takes in what lies between
+well-seen parts, and the verdict then judged patches the totems hardly see. Measured on the
 standard set (box and envmap seeds 1-5, 640 x 480, the same fits, 68 photos): the
 untouched photos' verdict scores 0.081-0.200 with the hull (envmap seed 4 a false alarm,
 its worst patches at the hull's left edge) and 0.052-0.141 filled; patch AP (L1) colour
