@@ -210,7 +210,8 @@ def _refine_cone(field, cand, K, shape, polish=None):
     """:func:`_refine` for a camera of known intrinsics ``K``: the silhouette is fitted
     as a sphere's tangent cone (:func:`_cone_points`, three parameters), by Nelder-Mead
     from the two best of a grid of shifts (:data:`GRID_SHIFTS` radii) and sizes
-    (:data:`GRID_SIZES`) around the candidate circle. Returns the cone's image as a cv2 ellipse, or None (as :func:`_refine`).
+    (:data:`GRID_SIZES`) around the candidate circle. Returns the cone's image as a
+    cv2 ellipse, or None (as :func:`_refine`).
     """
     import cv2
     from scipy.optimize import minimize
@@ -247,9 +248,9 @@ def _refine(field, cand, shape, polish=None):
     Nelder-Mead from the circle: a whole contour is fitted at once, so texture edges
     that cross it do not pull it away. With ``polish`` = (d/dx, d/dy) of the image
     (:func:`_gradients`), the ellipse is then moved to the largest mean step across it
-    (sub-pixel; the saturated alignment is flat across a rim a few pixels wide). Returns the ellipse as cv2
-    ((cx, cy), (2a, 2b), angle_deg), or None when the fit leaves the candidate, is not
-    sphere-like or is cut by the frame.
+    (sub-pixel; the saturated alignment is flat across a rim a few pixels wide).
+    Returns the ellipse as cv2 ((cx, cy), (2a, 2b), angle_deg), or None when the fit
+    leaves the candidate, is not sphere-like or is cut by the frame.
     """
     from scipy.optimize import minimize
 
