@@ -21,8 +21,8 @@ All samples of all rays are one flat Dr.Jit array (ray ``i`` owns lanes
 compositing a ``dr.block_sum`` over blocks of ``n``, so one kernel does a whole batch
 and reverse-mode AD stays a handful of vector operations. Refraction runs once per
 ray and its segment is spread to the ray's lanes by ``dr.repeat`` (whose adjoint is a
-block sum: no scatter-add contention in the backward pass); totem centres enter by a ``dr.select`` chain over the few
-totems, whose adjoint is a horizontal sum.
+block sum: no scatter-add contention in the backward pass); totem centres enter by a
+``dr.select`` chain over the few totems, whose adjoint is a horizontal sum.
 
 Samples are evenly spaced in the grid's unit coordinates (inverse depth in ``r``),
 which is evenly spaced along the ray (the map is projective). ``delta`` is the

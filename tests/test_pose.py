@@ -37,7 +37,8 @@ def _errors(method):
         est = pose.initial_pose(sphere_mask(K, (W, H), P, R), K, R, method=method)[0]
         e = est - P
         depth = e @ P / np.linalg.norm(P)
-        err.append((np.linalg.norm(e), abs(depth), np.linalg.norm(e - depth * P / np.linalg.norm(P))))
+        lateral = e - depth * P / np.linalg.norm(P)
+        err.append((np.linalg.norm(e), abs(depth), np.linalg.norm(lateral)))
     return np.array(err)
 
 
