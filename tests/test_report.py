@@ -13,7 +13,7 @@ from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_
                           make_scene, texture, with_square)
 
 FIELDS = {"verdict", "score", "threshold", "protected_fraction", "totems", "metrics",
-          "timing_s", "versions", "drivers", "key_fingerprint"}
+          "timing_s", "versions", "drivers", "key_fingerprint", "region"}
 
 
 def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():
@@ -25,6 +25,23 @@ def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():
     disc = np.hypot(u - K[0, 2], v - K[1, 2]) < r
     assert report.mask_iou(sil, disc) > 0.99
     assert abs(int(sil.sum()) - np.pi * r * r) < 2 * np.pi * r
+
+
+def test_the_papers_hull_region_on_request(tmp_path):
+    # totem points in two clusters: the default region keeps them apart, the paper's
+    # convex hull also takes in the gap, and report.json says which one was used
+    from verify_cases import points_in_box
+    photo = texture()
+    scene = make_scene(photo)
+    fit = make_fit(photo)
+    fit.totem_points = np.concatenate([points_in_box((20, 20, 100, 100), 3000),
+                                       points_in_box((220, 20, 300, 100), 3000, seed=1)])
+    filled = report.verify_scene(scene, fit)
+    hull = report.verify_scene(scene, fit, region_shape="hull")
+    assert filled.region == "filled" and hull.region == "hull"
+    assert not filled.protected[60, 160] and hull.protected[60, 160]
+    assert hull.protected_fraction > filled.protected_fraction
+    assert json.loads(report.write_verify(hull, tmp_path / "v").read_text())["region"] == "hull"
 
 
 def test_report_json_has_the_contract_fields_and_no_key(tmp_path):

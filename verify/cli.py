@@ -122,7 +122,7 @@ def _verify(args, scene, fit, fit_seconds=None) -> dict:
     from scenes.folder import read_truth
     from verify.report import verify_scene, write_verify
 
-    report = verify_scene(scene, fit, truth=read_truth(args.scene))
+    report = verify_scene(scene, fit, truth=read_truth(args.scene), region_shape=args.region)
     if fit_seconds is not None:
         report.timing_s["fit"] = round(fit_seconds, 2)
     out = _out_dir(args) / "verify"
@@ -233,6 +233,13 @@ def _print_summary(verb: str, summary: dict) -> None:
 
 # --------------------------------------------------------------------------- parser
 
+def _region_argument(v) -> None:
+    v.add_argument("--region", choices=("filled", "hull"), default="filled",
+                   help="protected region: well-seen pixels, gaps closed and holes filled "
+                        "(default), or their convex hull as the paper (to compare with "
+                        "the NeRF path)")
+
+
 def _fit_arguments(v) -> None:
     """Arguments shared by the verbs that fit: fit and check."""
     v.add_argument("scene")
@@ -286,9 +293,11 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("scene")
     v.add_argument("--fit", default=None, help="fit folder (default: OUT/fit, else fit now)")
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+    _region_argument(v)
 
     v = verb("check", cmd_check, "fit, then verify: the one-shot fit-and-compare")
     _fit_arguments(v)
+    _region_argument(v)
 
     v = verb("bench", cmd_bench, "run check over many scene folders and write the tables")
     v.add_argument("dirs", nargs="+", help="folders holding scene folders")
@@ -325,6 +334,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("scene")
     v.add_argument("--nerf", required=True, help="NeRF-path experiment (log) folder")
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+    _region_argument(v)
     return p
 
 

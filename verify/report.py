@@ -51,6 +51,7 @@ class Report:
     totems: list
     metrics: dict
     key_fingerprint: str
+    region: str = "filled"
     timing_s: dict = field(default_factory=dict)
     versions: dict = field(default_factory=dict)
 
@@ -59,7 +60,8 @@ class Report:
         return self.decision.drivers
 
     def to_json(self) -> dict:
-        """report.json: the contract's fields plus ``drivers`` and ``key_fingerprint``."""
+        """report.json: the contract's fields plus ``drivers``, ``key_fingerprint`` and
+        ``region`` (the protected region's shape)."""
         return {
             "verdict": self.verdict,
             "score": _num(self.score),
@@ -71,6 +73,7 @@ class Report:
             "versions": self.versions,
             "drivers": self.drivers,
             "key_fingerprint": self.key_fingerprint,
+            "region": self.region,
         }
 
 
@@ -109,7 +112,8 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
 # --------------------------------------------------------------------------- verify
 
 def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
-                 threshold: float | None = None, versions: dict | None = None) -> Report:
+                 threshold: float | None = None, versions: dict | None = None,
+                 region_shape: str = "filled") -> Report:
     """Compare the photo with the fit's re-rendered camera view.
 
     Parameters
@@ -121,6 +125,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     truth : ground truth of a synthetic scene, for recon_L1 and pose_L1 (else null).
     threshold : overrides ``verdict.VERDICT_THRESHOLD``.
     versions : extra version info for the report (e.g. ``backend.describe()``).
+    region_shape : "filled" (default) or "hull", the paper's protected region
+        (:func:`verify.region.protected_region`).
 
     Raises
     ------
@@ -133,7 +139,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     totem_mask = np.asarray(scene.masks, bool).any(axis=0)
 
     protected = region.protected_region(fit.totem_points, scene.K, (W, H),
-                                        n_totem_pixels=int(totem_mask.sum()))
+                                        n_totem_pixels=int(totem_mask.sum()),
+                                        shape=region_shape)
     grid = patches.patch_grid(totem_mask)
     errors = patches.pixel_errors(image, recon)
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
@@ -181,7 +188,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         protected=protected, protected_fraction=float(protected.mean()), recon=recon,
         image=image, totem_mask=totem_mask, grid=grid, heatmaps=heat, keep=keep,
         decision=decision, totems=totems, metrics=metrics,
-        key_fingerprint=folder.key_fingerprint(scene.radius, scene.ior),
+        key_fingerprint=folder.key_fingerprint(scene.radius, scene.ior), region=region_shape,
         timing_s=timing, versions={**_versions(), **(versions or {})})
 
 
