@@ -192,9 +192,10 @@ def _cone_points(q, K, n: int = 180):
     silhouette is exactly this curve (an ellipse elongated away from the principal
     point), whatever the sphere's radius: three parameters instead of an ellipse's five.
     """
+    from inverse.camera import pixel_rays, project
+
     u0, v0, s = q
-    axis = np.linalg.solve(K, [u0, v0, 1.0])
-    axis /= np.linalg.norm(axis)
+    axis = pixel_rays(K, u0, v0)
     h = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
     e1 = np.cross(h, axis)
     e1 /= np.linalg.norm(e1)
@@ -203,8 +204,7 @@ def _cone_points(q, K, n: int = 180):
     ring = np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2
 
     def image(alpha):
-        p = (np.cos(alpha) * axis + np.sin(alpha) * ring) @ np.asarray(K, float).T
-        return p[:, :2] / p[:, 2:]
+        return project(K, np.cos(alpha) * axis + np.sin(alpha) * ring)
 
     alpha = np.arctan(abs(s) / K[0, 0])
     pts = image(alpha)
@@ -377,13 +377,14 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
 
     if n is None:
         cands = cands[cands[:, 3] >= MIN_SCORE]
+    K = None if K is None else np.asarray(K, float)
     field = _orientation_field(colour, 1.0)
     polish = _gradients(colour, 0.7)
     edge = np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
     found = []                           # (ellipse, score), best first
     for cand in cands:
         ell = (_refine(field, cand, (H, W), polish) if K is None
-               else _refine_cone(field, cand, np.asarray(K, float), (H, W), polish))
+               else _refine_cone(field, cand, K, (H, W), polish))
         if ell is None:                  # keep the circle when the fit fails
             ell = ((cand[0], cand[1]), (2 * cand[2], 2 * cand[2]), 0.0)
         support = _support(ell, field)

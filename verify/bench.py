@@ -167,8 +167,8 @@ def run_bench(roots, out, *, jobs: int = 1, table1: bool = True, timeout: float 
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=len(planned) - sum(ld is None for _, ld in planned) + len(first),
-                   desc="bench", unit="run")
+        reusing = sum(ld is not None for _, ld in planned)
+        bar = tqdm(total=len(first) + reusing, desc="bench", unit="run")
     runs = []
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         for r in pool.map(one, first):

@@ -29,8 +29,8 @@ well-seen parts, and the verdict then judged patches the totems hardly see. Meas
 standard set (box and envmap seeds 1-5, 640 x 480, the same fits, 68 photos): the
 untouched photos' verdict scores 0.081-0.200 with the hull (envmap seed 4 a false alarm,
 its worst patches at the hull's left edge) and 0.052-0.141 filled; patch AP (L1) colour
-0.61 -> 0.62, splice 0.71 -> 0.76, inpaint 0.15 -> 0.16, removal 0.16 -> 0.18, insertion
-0.24 -> 0.25, shift 0.27 -> 0.28; the region covers 74 % of the photo instead of 82 %.
+0.610 -> 0.623, splice 0.706 -> 0.755, inpaint 0.145 -> 0.154, removal 0.160 -> 0.175,
+insertion 0.237 -> 0.251, shift 0.271 -> 0.277; the region covers 74 % of the photo instead of 82 %.
 Three shifts on envmap scenes that the hull flagged (0.26-0.31) score 0.05-0.17 filled.
 
 References
@@ -105,6 +105,8 @@ def protected_region(points: np.ndarray, K: np.ndarray, size: tuple[int, int],
     ------
     BadInput when no point lands in the image or no box passes (empty region).
     """
+    if shape not in ("filled", "hull"):
+        raise ValueError(f"shape must be 'filled' or 'hull', got {shape!r}")
     W, H = int(size[0]), int(size[1])
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -121,8 +123,6 @@ def protected_region(points: np.ndarray, K: np.ndarray, size: tuple[int, int],
     # mean count per pixel in a box x box window centred on each pixel (zeros outside)
     rho = ndimage.uniform_filter(counts, size=box, mode="constant", cval=0.0)
     dense = rho >= density * rho0 * (1.0 - 1e-9)
-    if shape not in ("filled", "hull"):
-        raise ValueError(f"shape must be 'filled' or 'hull', got {shape!r}")
     # a pixel is kept when it holds a point and lies inside a dense box
     in_dense_box = ndimage.maximum_filter(dense, size=box, mode="constant", cval=False)
     kept = in_dense_box & (counts > 0)
