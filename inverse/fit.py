@@ -108,6 +108,9 @@ class FitSettings:
     reflection: bool = True          # model the glass's front reflection (an ambient colour)
     drop_top_exits: bool = True      # ignore totem rays leaving through the top (see notes)
     lr_ambient: float = 0.002
+    stereo: bool = True              # keep stereo's geometry where held-out totems say so
+    stereo_res: tuple = (120, 160)   # (rows, columns) of the stereo depth maps
+    stereo_far_biases: tuple = (0.0, 1.0)
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -119,15 +122,16 @@ class FitResult:
 
     centers: np.ndarray            # (n, 3) fitted centres, camera frame, metres
     initial: np.ndarray            # (n, 3) initial centres
-    recon: np.ndarray              # (H, W, 3) sRGB [0, 1] float32, camera view from the grid
-    recon_depth: np.ndarray | None  # (H, W) metres, expected depth along camera rays
-    totem_points: np.ndarray       # (m, 3) camera-frame points of highest weight per ray
+    recon: np.ndarray              # (H, W, 3) sRGB [0, 1] float32, the re-rendered camera view
+    recon_depth: np.ndarray | None  # (H, W) metres, depth along camera rays
+    totem_points: np.ndarray       # (m, 3) camera-frame points where totem rays end
     totem_pred: np.ndarray         # (H, W, 3) sRGB fitted colour at totem pixels, 0 elsewhere
     grid: dict                     # density, colour, frame (np arrays)
     history: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
     scene_fingerprint: str = ""
+    geometry: dict = field(default_factory=dict)  # chosen geometry, hold-out errors
 
 
 # --------------------------------------------------------------------------- helpers
@@ -436,6 +440,19 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                                 np.asarray(g1), itg.n_samples, np.asarray(valid, bool))
     t_render = time.perf_counter() - t0
 
+    # ---- the grid's geometry against plane-sweep stereo, judged on held-out totems
+    t0 = time.perf_counter()
+    geometry = {"chosen": "grid", "holdout_L1": {}}
+    if settings.stereo:
+        view = _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed,
+                            refl_np, np.maximum(np.asarray(ambient, np.float64), 0.0),
+                            (W, H), settings)
+        geometry = {"chosen": view.chosen,
+                    "holdout_L1": {k: round(float(e), 5) for k, e in view.holdout.items()}}
+        if view.recon is not None:
+            recon, depth, totem_points = view.recon, view.depth, view.points
+    t_stereo = time.perf_counter() - t0
+
     steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
     timings = {
         "pose_init_s": t_pose,
@@ -444,6 +461,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         "steady_step_s": steady,
         "optimise_s": float(np.sum(step_times)),
         "render_s": t_render,
+        "stereo_s": t_stereo,
         "total_s": time.perf_counter() - t_start,
         "n_rays": int(n_rays),
         "pose_accepted": pose_accepted,
@@ -462,7 +480,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
-                     scene_fingerprint=scene_fingerprint(scene))
+                     scene_fingerprint=scene_fingerprint(scene), geometry=geometry)
 
 
 def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, observed,
@@ -486,6 +504,36 @@ def _totem_rays_np(itg, d_cam, jt):
     return (np.asarray(o_out, np.float64).T.reshape(-1, 3),
             np.asarray(d_out, np.float64).T.reshape(-1, 3),
             np.asarray(T_F, np.float64).reshape(-1), np.asarray(ok, bool).reshape(-1))
+
+
+def column_depth(density, frame: FrustumFrame) -> np.ndarray:
+    """Depth (metres) where each camera column of a raw density grid (nr, nt, ns, 1)
+    reaches transmittance 1/2 (the far plane if it never does), (nt, ns)."""
+    from inverse.integrator import DELTA_SCALE
+
+    dens = np.asarray(density, np.float64)[..., 0]
+    nr = dens.shape[0]
+    tau = np.cumsum(np.logaddexp(0.0, dens) * DELTA_SCALE / nr, axis=0)
+    k = np.where(tau[-1] > np.log(2.0), np.argmax(tau > np.log(2.0), axis=0), nr - 1)
+    r = (k + 0.5) / nr
+    return 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
+
+
+def _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed, refl,
+                 ambient, size, settings):
+    """:func:`inverse.stereo.choose_view` on the totem rays at the final centres."""
+    from inverse.stereo import choose_view
+
+    o, d, T, ok = _totem_rays_np(itg, d_cam, jt)
+    keep = ok & (T > 0.05)
+    P = np.asarray(centers, np.float64)[jt]
+    cos_in = np.abs(((o - P) * d).sum(1)) / np.asarray(radius, np.float64)[jt]
+    lin = np.clip(srgb_to_linear(observed) - refl[:, None] * ambient[None], 0.0, None)
+    lin = lin / np.maximum(T, 0.05)[:, None]
+    return choose_view(o[keep], d[keep], lin[keep], jt[keep], cos_in[keep], frame,
+                       column_depth(density, frame), size, res=settings.stereo_res,
+                       n_slices=settings.sweep_slices,
+                       far_biases=settings.stereo_far_biases)
 
 
 def _sweep_init(frame, o, d, jt, colour, settings):
@@ -628,7 +676,8 @@ def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) 
         "centers": np.asarray(result.centers).tolist(),
         "initial": np.asarray(result.initial).tolist(),
         "history": result.history, "timings": result.timings,
-        "settings": result.settings, "versions": backend.describe()})
+        "geometry": result.geometry, "settings": result.settings,
+        "versions": backend.describe()})
 
 
 def load_fit(fit_dir) -> FitResult:
@@ -670,7 +719,8 @@ def load_fit(fit_dir) -> FitResult:
                      totem_points=points, totem_pred=totem_pred, grid=grid,
                      history=meta.get("history", {}), timings=meta.get("timings", {}),
                      settings=meta.get("settings", {}),
-                     scene_fingerprint=str(meta.get("scene_fingerprint", "")))
+                     scene_fingerprint=str(meta.get("scene_fingerprint", "")),
+                     geometry=meta.get("geometry", {}))
 
 
 def render_grid(grid: dict, size, *, n: int = 128):

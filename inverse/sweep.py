@@ -9,10 +9,9 @@ the plane, the point is projected into the camera (grid cell ``(t, s)``) and the
 ray's colour is splatted there (bilinear), per totem. Per totem, the splats are
 spread by a Gaussian (normalised convolution: mean colour where the totem has rays,
 nothing elsewhere). The photo-consistency cost of a cell is the variance of the
-totems' mean colours there (only where >= 2 totems land, a fixed penalty elsewhere),
-box-filtered over a small window; each column's depth is the slice of least cost,
-median-filtered, holes filled. The colour map is the totems' consensus colour at
-that depth, holes filled by pull-push.
+totems' mean colours there (where >= 2 totems land; elsewhere neutral), aggregated by
+semi-global matching; each column's depth is the slice of least aggregated cost. The
+colour map is the totems' consensus colour at that depth, holes filled by pull-push.
 
 Everything is numpy over all rays at once (loops over slices and totems only).
 Colours are whatever the caller splats (here: sRGB of the Fresnel-corrected radiance).
@@ -21,6 +20,7 @@ Public functions
 ----------------
 ``slice_depths(frame, n) -> (n,) z`` metres, slice centres even in inverse depth;
 ``plane_sweep(o, d, colour, totem, frame, res, *, ...) -> SweepResult``;
+``semi_global(cost, p1, p2) -> cost`` aggregation of a (slices, rows, cols) volume;
 ``pull_push(values, weight) -> values`` hole filling of a 2-D map.
 """
 
@@ -43,7 +43,7 @@ class SweepResult:
     r : (nt, ns) unit inverse-depth coordinate of the surface per column (grid ``r``).
     depth : (nt, ns) metres, camera-frame ``z`` of the surface.
     colour : (nt, ns, C) consensus colour at that depth (holes filled).
-    confident : (nt, ns) bool, the depth came from >= 2 agreeing totems (not filled).
+    confident : (nt, ns) bool, at least two totems land in the cell at the chosen depth.
     cost : (n_slices, nt, ns) aggregated cost volume.
     z : (n_slices,) slice depths, metres.
     """
@@ -136,15 +136,43 @@ def pull_push(values: np.ndarray, weight: np.ndarray, *, levels: int = 8) -> np.
     return est
 
 
+def semi_global(cost: np.ndarray, p1: float, p2: float) -> np.ndarray:
+    """Semi-global matching (Hirschmueller 2008): ``cost`` (K, H, W) aggregated along
+    the four axis-aligned paths. A neighbour one label away costs ``p1`` more, any
+    larger jump ``p2``; so a depth map that is smooth, with a few sharp edges, wins
+    over per-cell noise. Returns the summed path costs, (K, H, W)."""
+    C = np.moveaxis(np.asarray(cost, np.float64), 0, -1)          # (H, W, K)
+
+    def along_x(C):
+        L = np.empty_like(C)
+        L[:, 0] = C[:, 0]
+        for x in range(1, C.shape[1]):
+            prev = L[:, x - 1]
+            low = prev.min(axis=1, keepdims=True)
+            up = np.pad(prev[:, 1:], ((0, 0), (0, 1)), constant_values=np.inf)
+            down = np.pad(prev[:, :-1], ((0, 0), (1, 0)), constant_values=np.inf)
+            step = np.minimum(prev, np.minimum(up, down) + p1)
+            L[:, x] = C[:, x] + np.minimum(step, low + p2) - low
+        return L
+
+    total = along_x(C) + along_x(C[:, ::-1])[:, ::-1]
+    Ct = np.transpose(C, (1, 0, 2))
+    total += np.transpose(along_x(Ct) + along_x(Ct[:, ::-1])[:, ::-1], (1, 0, 2))
+    return np.moveaxis(total, -1, 0)
+
+
 def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
-                sigma: float | None = None, window: int = 3, min_weight: float = 0.3,
-                single_penalty: float = 0.05, median: int = 3) -> SweepResult:
+                sigma: float | None = 1.5, min_weight: float = 0.3, p1: float = 0.3,
+                p2: float = 3.0, far_bias: float = 0.0) -> SweepResult:
     """Depth and colour of each grid column from the totems' parallax.
 
     Parameters
     ----------
     o, d : (m, 3) refracted rays leaving the totems (exit point, metres, and unit
-        direction), camera frame.
+        direction), camera frame. Rays near a sphere's rim carry blurred colours mixed
+        with reflections: leave them out (measured on box seed 2, 640x480: the true
+        slice is the least-cost one, +-2, in 49% of cells with every ray, 64% with
+        incidence cosine >= 0.5).
     colour : (m, C) colour each ray carries (e.g. sRGB of the radiance).
     totem : (m,) int, the totem each ray left.
     frame : the grid frame; the sweep's map covers its ``(s, t)`` range.
@@ -152,10 +180,17 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     n_slices : depth slices, even in inverse depth between ``frame.near`` and ``far``.
     sigma : Gaussian spread of each totem's splats, in cells; None = from the ray
         density (about 4 rays of a totem inside one sigma disc).
-    window : side of the box filter aggregating the cost (cells).
-    min_weight : a totem "lands" in a cell where its spread splat weight exceeds this.
-    single_penalty : cost where fewer than two totems land.
-    median : side of the median filter on the depth index (0 = none).
+    min_weight : a totem "lands" in a cell where its spread splat weight exceeds this
+        fraction of one ray's peak.
+    p1, p2 : semi-global matching penalties (:func:`semi_global`) in units of the
+        median cost.
+    far_bias : added to the normalised cost of the nearest slice, falling linearly to
+        0 at the farthest: where the colours agree at every depth, prefer far.
+
+    The cost of a cell at a slice is the variance of the landing totems' mean colours
+    where at least two land; where fewer land it says nothing, so it is the median
+    cost (a fixed penalty there would favour depths where the totems' footprints
+    overlap, not where they agree).
     """
     o = np.asarray(o, np.float64)
     d = np.asarray(d, np.float64)
@@ -174,8 +209,6 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     ax = (0, 0, sigma, sigma)
     wsum = ndimage.gaussian_filter(wsum, ax, mode="constant", truncate=2.5)
     csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant", truncate=2.5)
-    # Normalise so that a cell in a uniformly covered region has weight ~ rays/cell
-    # summed over the disc: landing = weight above min_weight * peak of one ray.
     peak = 1.0 / (2 * np.pi * sigma ** 2)
     land = wsum > min_weight * peak
     mu = csum / np.maximum(wsum, 1e-12)[..., None]
@@ -183,34 +216,20 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     lw = land.astype(np.float64)
     mean = (lw[..., None] * mu).sum(0) / np.maximum(n_land, 1)[..., None]
     var = (lw * np.square(mu - mean[None]).sum(-1)).sum(0) / np.maximum(n_land, 1)
-    cost = np.where(n_land >= 2, var, single_penalty)
-    if window > 1:
-        cost = ndimage.uniform_filter(cost, size=(1, window, window), mode="nearest")
+    defined = n_land >= 2
+    fill = float(np.median(var[defined])) if defined.any() else 1.0
+    cost = np.where(defined, var, fill) / max(fill, 1e-12)
+    cost = cost + far_bias * (1.0 - (np.arange(n_slices) + 0.5) / n_slices)[:, None, None]
+    if p2 > 0:
+        cost = semi_global(cost, p1, p2)
     k_best = np.argmin(cost, axis=0)
-    best = np.take_along_axis(cost, k_best[None], 0)[0]
-    n_best = np.take_along_axis(n_land, k_best[None], 0)[0]
-    confident = (n_best >= 2) & (best < single_penalty)
-    kf = k_best.astype(np.float64)
-    if median > 1:
-        # Median over confident neighbours only: fill the rest first (nearest).
-        if confident.any() and not confident.all():
-            idx = ndimage.distance_transform_edt(~confident, return_distances=False,
-                                                 return_indices=True)
-            kf = kf[tuple(idx)]
-        kf = ndimage.median_filter(kf, size=median, mode="nearest")
-    elif confident.any() and not confident.all():
-        idx = ndimage.distance_transform_edt(~confident, return_distances=False,
-                                             return_indices=True)
-        kf = kf[tuple(idx)]
-    k_int = np.clip(np.round(kf).astype(np.int64), 0, n_slices - 1)
-    # Colour: the landing totems' consensus at the chosen slice.
-    sel = k_int[None, None, ..., None]
-    mean_k = np.take_along_axis(mean, k_int[None, ..., None], 0)[0]
-    n_k = np.take_along_axis(n_land, k_int[None], 0)[0]
-    w_col = np.take_along_axis(wsum, k_int[None, None], 1)[:, 0].sum(0)
+    confident = np.take_along_axis(defined, k_best[None], 0)[0]
+    # Colour: the landing totems' consensus at the chosen slice, holes filled.
+    mean_k = np.take_along_axis(mean, k_best[None, ..., None], 0)[0]
+    n_k = np.take_along_axis(n_land, k_best[None], 0)[0]
+    w_col = np.take_along_axis(wsum, k_best[None, None], 1)[:, 0].sum(0)
     known = (n_k >= 1).astype(np.float64) * np.minimum(w_col / peak, 1.0)
-    del sel
     col = pull_push(mean_k, known)
-    r = (kf + 0.5) / n_slices
+    r = (k_best + 0.5) / n_slices
     depth = 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
     return SweepResult(r=r, depth=depth, colour=col, confident=confident, cost=cost, z=z)

@@ -228,8 +228,17 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
     assert back.scene_fingerprint == fit.scene_fingerprint(scene)
-    recon2, _ = fit.render_grid(back.grid, scene.size, n=32)
-    assert np.abs(recon2 - r.recon).max() < 1e-3
+    # The view comes from the geometry the held-out totems preferred.
+    assert back.geometry == r.geometry
+    held = r.geometry["holdout_L1"]
+    assert set(held) == {"grid", "stereo", "stereo_far1"}
+    assert held[r.geometry["chosen"]] == min(held.values())
+    # Without stereo the view is the grid's, and a saved grid re-renders it.
+    grid_only = fit.fit_scene(scene, settings=dataclasses.replace(st, stereo=False),
+                              fixed_pose=True)
+    assert grid_only.geometry["chosen"] == "grid"
+    recon2, _ = fit.render_grid(grid_only.grid, scene.size, n=32)
+    assert np.abs(recon2 - grid_only.recon).max() < 1e-3
     # The fingerprint follows what the fit reads: the totem pixels and the key.
     outside = scene.image.copy()
     outside[~scene.masks.any(0)] = 0.5

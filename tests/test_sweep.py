@@ -5,56 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import backend, camera
 from inverse.grid import frame_for_scene
-from inverse.sweep import plane_sweep, pull_push, slice_depths
-
-backend.use()
-
-import mitsuba as mi  # noqa: E402
-
-from inverse.sphere import totem_rays  # noqa: E402
-
-W, H = 240, 180
-K = camera.intrinsics(W, H, 60.0)
-CENTERS = np.array([[-0.48, 0.25, 1.18], [-0.16, 0.26, 1.34], [0.17, 0.30, 1.52],
-                    [0.58, 0.34, 1.33]])
-RADIUS = 0.1
-
-
-def _texture(x, y):
-    """A smooth colour texture on the plane (metres -> [0, 1] RGB)."""
-    rng = np.random.default_rng(0)
-    f = rng.normal(0.0, 2.5, (8, 2))
-    ph = rng.random((8, 3)) * 6.0
-    return np.stack([0.5 + 0.5 * np.mean([np.sin(f[i, 0] * x + f[i, 1] * y + ph[i, c])
-                                          for i in range(8)], 0) for c in range(3)], -1)
-
-
-def _rays_onto_plane(z_plane):
-    """Refracted totem rays (exit point, direction), totem index and the colour of the
-    plane ``z = z_plane`` where each ray meets it."""
-    vv, uu = np.mgrid[0:H, 0:W]
-    d = camera.pixel_rays(K, uu.ravel(), vv.ravel())
-    js = np.full(len(d), -1)
-    for j, P in enumerate(CENTERS):
-        b = d @ P
-        js[(b ** 2 - (P @ P - RADIUS ** 2) > 0) & (js < 0)] = j
-    d, js = d[js >= 0], js[js >= 0]
-    P = CENTERS[js].astype(np.float32)
-    o, do, _, ok = totem_rays(mi.Point3f(0.0), mi.Vector3f(*d.T.astype(np.float32)),
-                              mi.Point3f(*P.T), RADIUS, 1.52)
-    o = np.asarray(o, np.float64).T.reshape(-1, 3)
-    do = np.asarray(do, np.float64).T.reshape(-1, 3)
-    t = (z_plane - o[:, 2]) / do[:, 2]
-    ok = np.asarray(ok, bool).ravel() & (t > 0)
-    X = o + t[:, None] * do
-    return o[ok], do[ok], js[ok], _texture(X[ok, 0], X[ok, 1])
+from inverse.sweep import plane_sweep, pull_push, semi_global, slice_depths
+from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 
 
 def test_sweep_finds_a_textured_plane_depth():
     z_plane = 3.0
-    o, d, js, col = _rays_onto_plane(z_plane)
+    o, d, js, col = rays_onto_plane(z_plane)
     frame = frame_for_scene(K, (W, H), CENTERS, np.full(4, RADIUS))
     n = 48
     sw = plane_sweep(o, d, col, js, frame, (45, 60), n_slices=n)
@@ -74,7 +32,7 @@ def test_sweep_finds_a_textured_plane_depth():
     st = np.stack(np.meshgrid((np.arange(60) + 0.5) / 60, (np.arange(45) + 0.5) / 45), -1)
     X = frame.from_unit(np.concatenate([st, np.zeros(st.shape[:2] + (1,))], -1))
     X = X / X[..., 2:3] * z_plane
-    truth = _texture(X[..., 0], X[..., 1])
+    truth = texture(X[..., 0], X[..., 1])
     err = np.abs(sw.colour - truth)[rows, cols].mean()
     # Blurred by the splat spread (a few rays per sigma disc), but it is the texture.
     assert err < 0.65 * np.abs(truth[rows, cols] - truth[rows, cols].mean((0, 1))).mean()
@@ -92,3 +50,17 @@ def test_pull_push_keeps_known_values_and_fills_holes():
     assert np.all(np.isfinite(out))
     assert np.abs(out[hole] - field[hole]).mean() < 0.1 * np.ptp(field[..., 0])
     assert np.allclose(out[..., 1], 0.5)
+
+
+def test_semi_global_matching_recovers_a_piecewise_constant_label_from_noise():
+    rng = np.random.default_rng(3)
+    K_, H_, W_ = 16, 30, 40
+    labels = np.where(np.arange(W_)[None, :] < 20, 4, 11) * np.ones((H_, 1), int)
+    cost = rng.random((K_, H_, W_))                        # pure noise ...
+    np.put_along_axis(cost, labels[None], 0.1, 0)          # ... the truth lower
+    raw = np.argmin(cost, 0)
+    agg = np.argmin(semi_global(cost, 0.3, 1.0), 0)
+    assert np.mean(raw == labels) < 0.6
+    assert np.mean(agg == labels) > 0.95
+    # The aggregation keeps the edge: columns next to it on either side are right.
+    assert np.mean(agg[:, 18] == 4) > 0.9 and np.mean(agg[:, 21] == 11) > 0.9

@@ -1,0 +1,94 @@
+"""Tests of inverse/splat and inverse/stereo: rays meet a depth map where they pass
+behind it, splatting rebuilds the camera view, and leave-one-totem-out prefers the
+true geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inverse import camera
+from inverse.grid import frame_for_scene
+from inverse.splat import holdout_error, splat_image, surface_hits
+from inverse.stereo import choose_view
+from inverse.sweep import slice_depths
+from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
+
+FRAME = frame_for_scene(K, (W, H), CENTERS, np.full(4, RADIUS))
+
+
+def _plane_map(z, res=(60, 80)):
+    return np.full(res, float(z))
+
+
+def test_rays_meet_a_plane_at_its_projected_point():
+    z_plane = 2.5
+    o, d, _, _ = rays_onto_plane(z_plane)
+    u, v, z, hit = surface_hits(o, d, FRAME, _plane_map(z_plane), n_steps=512)
+    t = (z_plane - o[:, 2]) / d[:, 2]
+    uv = camera.project(K, o + t[:, None] * d)
+    inside = hit & (np.abs(uv[:, 0] - W / 2) < W / 3) & (np.abs(uv[:, 1] - H / 2) < H / 3)
+    assert inside.sum() > 1000
+    # The planes are 512 steps even in inverse depth: the hit lies on the first one
+    # at or behind the surface, so within a step of it.
+    dz = z_plane ** 2 * (1 / FRAME.near - 1 / FRAME.far) / 512
+    assert np.all((z[inside] >= z_plane - 1e-9) & (z[inside] <= z_plane + 2 * dz))
+    assert np.median(np.hypot(u - uv[:, 0], v - uv[:, 1])[inside]) < 1.0
+
+
+def test_a_ray_that_meets_nothing_stops_at_the_far_backdrop():
+    o = np.array([[0.0, 0.0, 1.0]])
+    d = np.array([[0.0, 0.0, 1.0]])
+    u, v, z, hit = surface_hits(o, d, FRAME, _plane_map(np.inf), n_steps=64)
+    assert hit[0] and z[0] == slice_depths(FRAME, 64)[-1]
+    assert np.allclose([u[0], v[0]], K[:2, 2], atol=1e-6)
+
+
+def test_splat_keeps_each_value_at_its_pixel_and_fills_between():
+    rng = np.random.default_rng(5)
+    n = 3000
+    u = rng.integers(0, W, n).astype(float)
+    v = rng.integers(0, H, n).astype(float)
+    values = np.stack([u / W, v / H, np.full(n, 0.5)], 1)
+    img = splat_image(u, v, values, (W, H))
+    assert img.shape == (H, W, 3)
+    assert np.allclose(img[v.astype(int), u.astype(int)], values)
+    yy, xx = np.mgrid[0:H, 0:W]
+    assert np.abs(img[..., 0] - xx / W).mean() < 0.03
+    assert np.abs(img[..., 1] - yy / H).mean() < 0.03
+
+
+def test_holdout_error_is_least_at_the_true_depth():
+    z_plane = 3.0
+    o, d, js, col = rays_onto_plane(z_plane)
+    errs = {z: holdout_error(o, d, col, js, FRAME, _plane_map(z), (W, H))[0]
+            for z in (1.8, 3.0, 6.0)}
+    assert errs[3.0] < 0.7 * min(errs[1.8], errs[6.0])
+
+
+def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
+    z_plane = 3.0
+    o, d, js, col = rays_onto_plane(z_plane)
+    cos_in = np.ones(len(o))
+    lin = col ** 2.2                     # any radiance; the view is compared in display
+    wrong = np.full((30, 40), FRAME.far)             # a far backdrop, as fits settle
+    view = choose_view(o, d, lin, js, cos_in, FRAME, wrong, (W, H), res=(45, 60),
+                       far_biases=(0.0,))
+    assert view.chosen == "stereo"
+    assert view.holdout["stereo"] < view.holdout["grid"]
+    # Where the totems see the plane, the splatted view is the plane's texture.
+    rows, cols = slice(int(0.35 * H), int(0.6 * H)), slice(int(0.3 * W), int(0.7 * W))
+    vv, uu = np.mgrid[rows, cols]
+    X = camera.pixel_rays(K, uu.ravel(), vv.ravel())
+    X = X / X[:, 2:3] * z_plane
+    truth = texture(X[:, 0], X[:, 1])
+    from scenes.render import linear_to_srgb
+    got = view.recon[rows, cols].reshape(-1, 3)
+    expect = linear_to_srgb(np.clip(truth ** 2.2, 0, 1))
+    spread = np.abs(expect - expect.mean(0)).mean()
+    assert np.abs(got - expect).mean() < 0.5 * spread
+    # Its points lie on the plane.
+    assert np.median(np.abs(view.points[:, 2] - z_plane)) < 0.1
+    # A right grid geometry is kept.
+    kept = choose_view(o, d, lin, js, cos_in, FRAME, np.full((30, 40), z_plane), (W, H),
+                       res=(45, 60), far_biases=(0.0,))
+    assert kept.holdout["grid"] <= 1.05 * kept.holdout["stereo"]
