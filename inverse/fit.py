@@ -17,11 +17,14 @@ colour (fitted; starts at the mean observed radiance). Without it, dark regions 
 through the totems take the tint of the reflected room (measured: box seed 1 at
 320x240, recon L1 0.078 -> 0.068; envmap seed 1, 0.104 -> 0.090).
 
-Optional (``FitSettings.sweep``, off by default): the grid starts from plane-sweep
-stereo between the totems (:mod:`inverse.sweep`). Measured at 320x240 it helps where
-surfaces are textured (box seed 3: 0.131 -> 0.103) but hurts where a smooth bright
-environment is photo-consistent at every depth (envmap: 0.09 -> 0.14-0.16), so it is
-not the default.
+The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
+weakly determined (a far backdrop explains each totem ray on its own), so after the
+fit it is compared with plane-sweep stereo between the totems, and the one that
+predicts held-out totems better gives the view, pixel by pixel (:mod:`inverse.stereo`):
+where stereo wins, the view is splatted from the totem rays at its depth rather than
+rendered from the grid; ``fit.json``'s ``geometry`` says how much. (Starting the grid from the stereo
+depth instead was measured and dropped: the fit drifted from it, box seed 2 recon L1
+0.098 splatted -> 0.109-0.135 fitted.)
 
 Schedule: coarse to fine (the grid is resampled between stages), Adam
 (``mi.ad.Adam``); the totem centres are frozen for the first part of the steps, then
@@ -100,16 +103,12 @@ class FitSettings:
     far_factor: float = 1000.0       # far plane: effectively at infinity (see notes)
     render_samples: int = 128
     seed: int = 0
-    sweep: bool = False              # initialise the grid by plane-sweep stereo (see notes)
-    sweep_res: tuple = (60, 80)      # (rows, columns) of the sweep's map
-    sweep_slices: int = 64
-    surface_density: float = 3.0     # raw density of the swept surface voxels
-    empty_density: float = -6.0      # raw density in front of the swept surface
     reflection: bool = True          # model the glass's front reflection (an ambient colour)
     drop_top_exits: bool = True      # ignore totem rays leaving through the top (see notes)
     lr_ambient: float = 0.002
     stereo: bool = True              # keep stereo's geometry where held-out totems say so
     stereo_res: tuple = (120, 160)   # (rows, columns) of the stereo depth maps
+    stereo_slices: int = 64
     stereo_far_biases: tuple = (0.0, 1.0)
 
     def to_dict(self) -> dict:
@@ -307,18 +306,10 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     mean_lin = srgb_to_linear(observed).mean(0) / 0.9
     # The glass also reflects (Fresnel R = 1 - sqrt(T_F) at each of the two equal
     # interfaces): modelled as R times one ambient linear colour, first the mean.
-    o_np, dout_np, T_np, ok_np = _totem_rays_np(itg, d_cam, jt)
+    _, _, T_np, ok_np = _totem_rays_np(itg, d_cam, jt)
     refl_np = np.where(ok_np, 1.0 - np.sqrt(np.clip(T_np, 0.0, 1.0)), 0.0) \
         if settings.reflection else np.zeros(n_rays)
     ambient0 = srgb_to_linear(observed).mean(0)
-    t0 = time.perf_counter()
-    swept = None
-    if settings.sweep:
-        lin = srgb_to_linear(observed) - refl_np[:, None] * ambient0[None]
-        keep = ok_np & (T_np > 0.05)
-        col = linear_to_srgb(np.clip(lin[keep], 0.0, None) / T_np[keep, None])
-        swept = _sweep_init(frame, o_np[keep], dout_np[keep], jt[keep], col, settings)
-    t_sweep = time.perf_counter() - t0
     obs_dr = mi.Color3f(observed[:, 0], observed[:, 1], observed[:, 2])
     refl_dr = mi.Float(refl_np.astype(np.float32))
     ambient = mi.Float(ambient0.astype(np.float32))
@@ -339,8 +330,6 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     density = d0
     colour = np.broadcast_to(mean_lin.astype(np.float32),
                              tuple(settings.colour_res) + (3,)).copy()
-    if swept is not None:
-        density, colour = swept
     centers = initial.copy()
     bar = None
     if progress:
@@ -446,17 +435,15 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     if settings.stereo:
         view = _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed,
                             refl_np, np.maximum(np.asarray(ambient, np.float64), 0.0),
-                            (W, H), settings)
-        geometry = {"chosen": view.chosen,
+                            recon, totem_points, (W, H), settings)
+        geometry = {"chosen": view.chosen, "stereo_share": round(view.stereo_share, 4),
                     "holdout_L1": {k: round(float(e), 5) for k, e in view.holdout.items()}}
-        if view.recon is not None:
-            recon, depth, totem_points = view.recon, view.depth, view.points
+        recon, depth, totem_points = view.recon, view.depth, view.points
     t_stereo = time.perf_counter() - t0
 
     steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
     timings = {
         "pose_init_s": t_pose,
-        "sweep_s": t_sweep,
         "first_step_s": step_times[0] if step_times else None,
         "steady_step_s": steady,
         "optimise_s": float(np.sum(step_times)),
@@ -520,7 +507,7 @@ def column_depth(density, frame: FrustumFrame) -> np.ndarray:
 
 
 def _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed, refl,
-                 ambient, size, settings):
+                 ambient, grid_view, grid_points, size, settings):
     """:func:`inverse.stereo.choose_view` on the totem rays at the final centres."""
     from inverse.stereo import choose_view
 
@@ -531,33 +518,10 @@ def _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed, refl
     lin = np.clip(srgb_to_linear(observed) - refl[:, None] * ambient[None], 0.0, None)
     lin = lin / np.maximum(T, 0.05)[:, None]
     return choose_view(o[keep], d[keep], lin[keep], jt[keep], cos_in[keep], frame,
-                       column_depth(density, frame), size, res=settings.stereo_res,
-                       n_slices=settings.sweep_slices,
+                       column_depth(density, frame), grid_view, grid_points, size,
+                       res=settings.stereo_res,
+                       n_slices=settings.stereo_slices,
                        far_biases=settings.stereo_far_biases)
-
-
-def _sweep_init(frame, o, d, jt, colour, settings):
-    """Density and colour grids initialised from plane-sweep stereo (:mod:`inverse.sweep`).
-
-    ``o, d`` refracted rays (numpy), ``colour`` the sRGB radiance each carries.
-    Density: a surface (``surface_density``) in the voxels around each column's swept
-    depth, empty (``empty_density``) in front of it, ``density_init`` behind. Colour:
-    the swept consensus colour (linear), the same in every depth slice.
-    """
-    from inverse.sweep import plane_sweep
-
-    sw = plane_sweep(o, d, colour, jt, frame, settings.sweep_res,
-                     n_slices=settings.sweep_slices)
-    nr, nt, ns = settings.density_res
-    r_map = resample(sw.r[None, ..., None].astype(np.float32), (1, nt, ns))[0, ..., 0]
-    r_vox = (np.arange(nr) + 0.5) / nr
-    diff = (r_vox[:, None, None] - r_map[None]) * nr            # in voxels
-    density = np.where(diff < -0.75, settings.empty_density,
-                       np.where(diff <= 0.75, settings.surface_density,
-                                settings.density_init)).astype(np.float32)[..., None]
-    lin_map = srgb_to_linear(np.clip(sw.colour, 0.0, 1.0)).astype(np.float32)
-    colour = resample(lin_map[None], tuple(settings.colour_res))
-    return density, colour
 
 
 def _outline_term(masks, K, radius):

@@ -16,7 +16,9 @@ Public functions
 ----------------
 ``surface_hits(o, d, frame, depth, n_steps) -> (u, v, z, hit)``;
 ``splat_image(u, v, values, size) -> (H, W, C)``;
-``holdout_error(o, d, radiance, totem, frame, depth, size) -> float``.
+``holdout_errors(o, d, radiance, totem, frame, depth, size) -> (errors, u, v)``;
+``holdout_error(...) -> (mean error, fraction landing)``;
+``error_map(errors, u, v, size) -> (mean error map, ray density)``.
 """
 
 from __future__ import annotations
@@ -62,11 +64,11 @@ def surface_hits(o, d, frame: FrustumFrame, depth, *, n_steps: int = 256):
         X = o + t[:, None] * d
         u = K[0, 0] * X[:, 0] / zk + K[0, 2]
         v = K[1, 1] * X[:, 1] / zk + K[1, 2]
-        s = np.floor((u - frame.u_range[0]) / (frame.u_range[1] - frame.u_range[0]) * ns)
-        r = np.floor((v - frame.v_range[0]) / (frame.v_range[1] - frame.v_range[0]) * nt)
-        inside = (t > 0) & (s >= 0) & (s < ns) & (r >= 0) & (r < nt)
+        s, r = frame.pixel_to_st(u, v)
+        col, row = np.floor(s * ns), np.floor(r * nt)
+        inside = (t > 0) & (col >= 0) & (col < ns) & (row >= 0) & (row < nt)
         surf = np.full(m, np.inf)
-        surf[inside] = depth[r[inside].astype(int), s[inside].astype(int)]
+        surf[inside] = depth[row[inside].astype(int), col[inside].astype(int)]
         new = ~hit & inside & ((zk >= surf) | (i == n_steps - 1))
         u_hit[new], v_hit[new], z_hit[new] = u[new], v[new], zk
         hit |= new
@@ -100,31 +102,60 @@ def splat_image(u, v, values, size, *, hit=None) -> np.ndarray:
     return pull_push(mean.reshape(H, W, -1), weight.reshape(H, W))
 
 
-def holdout_error(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
-                  to_display=None, n_steps: int = 256) -> tuple[float, float]:
-    """Leave-one-totem-out error of a depth map.
+def holdout_errors(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
+                   to_display=None, n_steps: int = 256):
+    """Leave-one-totem-out errors of a depth map, per ray.
 
     For each totem, the other totems' rays are splatted at ``depth``
     (:func:`splat_image`) and the held-out totem's rays read that image where they
-    meet the surface. Returns (mean absolute error per ray and channel over the
-    held-out rays that land in the image, fraction of rays that do).
+    meet the surface. ``radiance`` (m, 3) is what each ray carries (e.g. linear RGB);
+    ``to_display`` maps it to the space the error is taken in (e.g. linear -> sRGB;
+    default none).
 
-    ``radiance`` (m, 3) is what each ray carries (e.g. linear RGB); ``to_display``
-    maps it to the space the error is taken in (e.g. linear -> sRGB; default none).
+    Returns
+    -------
+    errors : (m,) mean absolute error over channels; NaN where the ray does not meet
+        the surface inside the image.
+    u, v : (m,) camera pixel coordinates where each ray meets the surface.
     """
     radiance = np.asarray(radiance, np.float64)
     totem = np.asarray(totem)
     u, v, _, hit = surface_hits(o, d, frame, depth, n_steps=n_steps)
     ui, vi, ok = _pixels(u, v, hit, size)
     show = to_display or (lambda x: x)
-    err, n = 0.0, 0
+    errors = np.full(len(totem), np.nan)
     for j in np.unique(totem):
         held = totem == j
         test = held & ok
-        if not test.any():
-            continue
-        img = splat_image(u, v, radiance, size, hit=hit & ~held)
-        pred = img[vi[test], ui[test]]
-        err += float(np.abs(show(pred) - show(radiance[test])).sum() / radiance.shape[1])
-        n += int(test.sum())
-    return (err / n if n else float("inf")), n / max(len(totem), 1)
+        if test.any():
+            img = splat_image(u, v, radiance, size, hit=hit & ~held)
+            errors[test] = np.abs(show(img[vi[test], ui[test]])
+                                  - show(radiance[test])).mean(1)
+    return errors, u, v
+
+
+def holdout_error(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
+                  to_display=None, n_steps: int = 256) -> tuple[float, float]:
+    """Mean of :func:`holdout_errors` over the rays that meet the surface in the image,
+    and the fraction of rays that do."""
+    errors, _, _ = holdout_errors(o, d, radiance, totem, frame, depth, size,
+                                  to_display=to_display, n_steps=n_steps)
+    seen = np.isfinite(errors)
+    return (float(errors[seen].mean()) if seen.any() else float("inf")), float(seen.mean())
+
+
+def error_map(errors, u, v, size, *, sigma: float = 16.0):
+    """Per-ray errors spread over the image where the rays land: (mean error (H, W),
+    ray density (H, W), rays per pixel after a Gaussian of ``sigma`` px)."""
+    from scipy import ndimage
+
+    W, H = size
+    ok = np.isfinite(errors)
+    ui, vi, inside = _pixels(u, v, ok, size)
+    total = np.zeros((H, W))
+    count = np.zeros((H, W))
+    np.add.at(total, (vi[inside], ui[inside]), errors[inside])
+    np.add.at(count, (vi[inside], ui[inside]), 1.0)
+    total = ndimage.gaussian_filter(total, sigma)
+    count = ndimage.gaussian_filter(count, sigma)
+    return total / np.maximum(count, 1e-12), count

@@ -9,7 +9,7 @@ import numpy as np
 from inverse import camera
 from inverse.grid import frame_for_scene
 from inverse.splat import holdout_error, splat_image, surface_hits
-from inverse.stereo import choose_view
+from inverse.stereo import choose_view, stereo_weight
 from inverse.sweep import slice_depths
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 
@@ -71,9 +71,10 @@ def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
     cos_in = np.ones(len(o))
     lin = col ** 2.2                     # any radiance; the view is compared in display
     wrong = np.full((30, 40), FRAME.far)             # a far backdrop, as fits settle
-    view = choose_view(o, d, lin, js, cos_in, FRAME, wrong, (W, H), res=(45, 60),
-                       far_biases=(0.0,))
-    assert view.chosen == "stereo"
+    flat = np.full((H, W, 3), 0.5, np.float32)       # and a grey view from it
+    view = choose_view(o, d, lin, js, cos_in, FRAME, wrong, flat, np.zeros((0, 3)),
+                       (W, H), res=(45, 60), far_biases=(0.0,))
+    assert view.chosen == "stereo" and view.stereo_share > 0.5
     assert view.holdout["stereo"] < view.holdout["grid"]
     # Where the totems see the plane, the splatted view is the plane's texture.
     rows, cols = slice(int(0.35 * H), int(0.6 * H)), slice(int(0.3 * W), int(0.7 * W))
@@ -89,6 +90,50 @@ def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
     # Its points lie on the plane.
     assert np.median(np.abs(view.points[:, 2] - z_plane)) < 0.1
     # A right grid geometry is kept.
-    kept = choose_view(o, d, lin, js, cos_in, FRAME, np.full((30, 40), z_plane), (W, H),
-                       res=(45, 60), far_biases=(0.0,))
+    kept = choose_view(o, d, lin, js, cos_in, FRAME, np.full((30, 40), z_plane), flat,
+                       np.zeros((0, 3)), (W, H), res=(45, 60), far_biases=(0.0,))
     assert kept.holdout["grid"] <= 1.05 * kept.holdout["stereo"]
+
+
+def test_each_pixel_takes_the_geometry_whose_held_out_rays_erred_less_nearby():
+    z_plane = 3.0
+    o, d, js, col = rays_onto_plane(z_plane)
+    lin = col ** 2.2
+    from scenes.render import linear_to_srgb
+    vv, uu = np.mgrid[0:H, 0:W]
+    X = camera.pixel_rays(K, uu.ravel(), vv.ravel())
+    truth = linear_to_srgb(np.clip(texture(*(X[:, :2] / X[:, 2:3] * z_plane).T) ** 2.2, 0, 1))
+    truth = truth.reshape(H, W, 3).astype(np.float32)
+    # The grid is right left of u = 0.55 W (depth and view) and a far backdrop beyond.
+    s_cut = FRAME.pixel_to_st(0.55 * W, 0)[0]
+    grid_depth = np.full((30, 40), z_plane)
+    grid_depth[:, int(s_cut * 40):] = FRAME.far
+    grid_view = truth.copy()
+    grid_view[:, int(0.55 * W):] = 0.5
+    view = choose_view(o, d, lin, js, np.ones(len(o)), FRAME, grid_depth, grid_view,
+                       np.zeros((0, 3)), (W, H), res=(45, 60), far_biases=(0.0,))
+    rows = slice(int(0.35 * H), int(0.6 * H))
+    right = (rows, slice(int(0.62 * W), int(0.7 * W)))
+    left = (rows, slice(int(0.3 * W), int(0.48 * W)))
+    grey = np.abs(0.5 - truth[right]).mean()
+    assert np.abs(view.recon[right] - truth[right]).mean() < 0.6 * grey
+    assert np.abs(view.recon[left] - truth[left]).mean() < 0.6 * np.abs(
+        truth[left] - truth[left].mean((0, 1))).mean()
+    assert 0.0 < view.stereo_share < 1.0
+
+
+def test_stereo_weight_follows_the_local_held_out_errors():
+    rng = np.random.default_rng(7)
+    n = 4000
+    u = rng.uniform(0, W, n)
+    v = rng.uniform(0, H / 2, n)                     # no rays in the lower half
+    left = u < W / 2
+    grid = (np.where(left, 0.01, 0.08), u, v)        # the grid errs on the right ...
+    stereo = (np.where(left, 0.05, 0.02), u, v)      # ... stereo on the left
+    for prefer in (False, True):
+        w = stereo_weight(grid, stereo, (W, H), prefer_stereo=prefer, sigma=8.0)
+        assert w.shape == (H, W)
+        assert w[: H // 3, : W // 3].max() < 0.1
+        assert w[: H // 3, 2 * W // 3:].min() > 0.9
+        # Where no held-out ray landed, the whole view's choice.
+        assert np.allclose(w[-H // 6:], float(prefer), atol=0.05)
