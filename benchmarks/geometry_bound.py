@@ -1,0 +1,115 @@
+"""How good can the camera view from the totem pixels be? The view splatted from the
+totem rays at the TRUE depth, with the true totem centres, against the bench's recon.
+
+    python benchmarks/geometry_bound.py SET BENCH_OUT
+
+For each untouched scene of SET with ground truth, and its ``joint`` run in BENCH_OUT
+(``totems bench``), prints the recon L1 of the run and of the true-depth splat, both
+over the run's protected region (totem pixels excluded): the first minus the second is
+what the fit's geometry costs; the second is what the totems' sampling allows with
+this simple splat (pull-push between the rays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def true_depth(desc: dict) -> np.ndarray:
+    """Camera-frame z (metres) of the first surface along each pixel's ray, the
+    scene rendered without totems; inf where the ray meets nothing."""
+    from inverse import backend
+    from scenes import render
+    backend.use()
+    import drjit as dr
+    import mitsuba as mi
+
+    W, H = (int(s) for s in desc["size"])
+    scene = mi.load_dict(render.scene_dict(desc, spp=1, totems=False)[0])
+    idx = dr.arange(mi.UInt32, W * H)
+    pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
+    ray, _ = scene.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    z = np.array(si.t * ray.d.z, np.float64)
+    z[~np.array(si.is_valid())] = np.inf
+    return z.reshape(H, W)
+
+
+def true_depth_view(scene, truth, desc) -> np.ndarray:
+    """The camera view splatted from the totem rays (true centres) at the true depth."""
+    from inverse import backend, camera, sphere
+    from inverse.fit import _totem_pixels
+    from inverse.grid import frame_for_scene
+    from inverse.splat import splat_image, surface_hits
+    from scenes.render import linear_to_srgb, srgb_to_linear
+    backend.use()
+    import mitsuba as mi
+
+    W, H = scene.size
+    K = np.asarray(scene.K, np.float64)
+    n = scene.masks.shape[0]
+    P = np.asarray(truth.totem_pose, np.float64)
+    radius = np.broadcast_to(np.asarray(scene.radius, np.float64), (n,))
+    ior = np.broadcast_to(np.asarray(scene.ior, np.float64), (n,))
+    u, v, jt = _totem_pixels(scene.masks, 1)
+    d = camera.pixel_rays(K, u, v).astype(np.float32)
+    f32 = lambda a: mi.Float(np.asarray(a, np.float32))  # noqa: E731
+    path = sphere.totem_path(mi.Point3f(0.0), mi.Vector3f(*[f32(d[:, i]) for i in range(3)]),
+                             mi.Point3f(*[f32(P[jt, i]) for i in range(3)]),
+                             f32(radius[jt]), f32(ior[jt]))
+    o = np.asarray(path.E, np.float64).T.reshape(-1, 3)
+    d_out = np.asarray(path.d_out, np.float64).T.reshape(-1, 3)
+    T = np.asarray(path.T, np.float64).ravel()
+    keep = np.asarray(path.valid, bool).ravel() & (T > 0.05)
+    # Undo the glass: its front reflection (Fresnel R times the mean radiance, the fit's
+    # starting ambient) and its transmittance.
+    obs = srgb_to_linear(np.asarray(scene.image, np.float64)[v, u])
+    refl = 1.0 - np.sqrt(np.clip(T, 0.0, 1.0))
+    lin = np.clip(obs - refl[:, None] * obs[keep].mean(0), 0.0, None)
+    lin = lin / np.maximum(T, 0.05)[:, None]
+    frame = frame_for_scene(K, (W, H), P, radius)
+    z = true_depth(desc)
+    # The true depth on a map over the frame's range, about a cell per pixel.
+    (u0, u1), (v0, v1) = frame.u_range, frame.v_range
+    ns, nt = int(round(u1 - u0)), int(round(v1 - v0))
+    cols = np.clip(np.round(u0 + (np.arange(ns) + 0.5) / ns * (u1 - u0)), 0, W - 1)
+    rows = np.clip(np.round(v0 + (np.arange(nt) + 0.5) / nt * (v1 - v0)), 0, H - 1)
+    depth = np.minimum(z[rows.astype(int)][:, cols.astype(int)], frame.far)
+    uu, vv, _, hit = surface_hits(o[keep], d_out[keep], frame, depth)
+    return linear_to_srgb(np.clip(splat_image(uu, vv, lin[keep], (W, H), hit=hit), 0, 1))
+
+
+def main(argv=None) -> int:
+    from scenes import folder
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("set", type=Path)
+    p.add_argument("bench_out", type=Path)
+    args = p.parse_args(argv)
+    rows = []
+    for sd in sorted(x for x in args.set.iterdir() if (x / "truth" / "scene.json").is_file()):
+        run = args.bench_out / "runs" / f"{sd.name}-joint" / "verify"
+        if (sd / "manip_mask.png").exists() or not (run / "recon.png").is_file():
+            continue
+        scene, truth = folder.read_scene(sd), folder.read_truth(sd)
+        desc = json.loads((sd / "truth" / "scene.json").read_text())
+        seen = folder.read_mask(run / "protect_mask.png") & ~scene.masks.any(0)
+        clean = np.asarray(truth.clean, np.float64)
+        fitted = np.abs(folder.read_image(run / "recon.png") - clean).mean(2)[seen].mean()
+        bound = np.abs(true_depth_view(scene, truth, desc) - clean).mean(2)[seen].mean()
+        rows.append((sd.name, fitted, bound))
+        print(f"{sd.name:12s} recon L1 {fitted:.3f}   true-depth splat {bound:.3f}", flush=True)
+    for preset in sorted({r[0].rsplit("-", 1)[0] for r in rows}):
+        sel = [r for r in rows if r[0].rsplit("-", 1)[0] == preset]
+        print(f"{preset:12s} mean recon L1 {np.mean([r[1] for r in sel]):.3f}   "
+              f"true-depth splat {np.mean([r[2] for r in sel]):.3f}   (n={len(sel)})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
