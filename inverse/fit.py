@@ -22,9 +22,9 @@ weakly determined (a far backdrop explains each totem ray on its own), so after 
 fit it is compared with plane-sweep stereo between the totems, and the one that
 predicts held-out totems better gives the view, pixel by pixel (:mod:`inverse.stereo`):
 where stereo wins, the view is splatted from the totem rays at its depth rather than
-rendered from the grid; ``fit.json``'s ``geometry`` says how much. (Starting the grid from the stereo
-depth instead was measured and dropped: the fit drifted from it, box seed 2 recon L1
-0.098 splatted -> 0.109-0.135 fitted.)
+rendered from the grid; ``fit.json``'s ``geometry`` says how much. (Starting the grid
+from the stereo depth instead was measured and dropped: the fit drifted from it, box
+seed 2 recon L1 0.098 splatted -> 0.109-0.135 fitted.)
 
 Schedule: coarse to fine (the grid is resampled between stages), Adam
 (``mi.ad.Adam``); the totem centres are frozen for the first part of the steps, then
@@ -519,8 +519,7 @@ def _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed, refl
     lin = lin / np.maximum(T, 0.05)[:, None]
     return choose_view(o[keep], d[keep], lin[keep], jt[keep], cos_in[keep], frame,
                        column_depth(density, frame), grid_view, grid_points, size,
-                       res=settings.stereo_res,
-                       n_slices=settings.stereo_slices,
+                       res=settings.stereo_res, n_slices=settings.stereo_slices,
                        far_biases=settings.stereo_far_biases)
 
 

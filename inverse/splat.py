@@ -16,7 +16,7 @@ Public functions
 ----------------
 ``surface_hits(o, d, frame, depth, n_steps) -> (u, v, z, hit)``;
 ``splat_image(u, v, values, size) -> (H, W, C)``;
-``holdout_errors(o, d, radiance, totem, frame, depth, size) -> (errors, u, v)``;
+``holdout_errors(o, d, radiance, totem, frame, depth, size) -> (errors, u, v, z, hit)``;
 ``holdout_error(...) -> (mean error, fraction landing)``;
 ``error_map(errors, u, v, size) -> (mean error map, ray density)``.
 """
@@ -116,11 +116,12 @@ def holdout_errors(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
     -------
     errors : (m,) mean absolute error over channels; NaN where the ray does not meet
         the surface inside the image.
-    u, v : (m,) camera pixel coordinates where each ray meets the surface.
+    u, v, z, hit : where each ray meets the surface (:func:`surface_hits`), so a
+        caller that splats at the same map need not cast the rays again.
     """
     radiance = np.asarray(radiance, np.float64)
     totem = np.asarray(totem)
-    u, v, _, hit = surface_hits(o, d, frame, depth, n_steps=n_steps)
+    u, v, z, hit = surface_hits(o, d, frame, depth, n_steps=n_steps)
     ui, vi, ok = _pixels(u, v, hit, size)
     show = to_display or (lambda x: x)
     errors = np.full(len(totem), np.nan)
@@ -131,15 +132,15 @@ def holdout_errors(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
             img = splat_image(u, v, radiance, size, hit=hit & ~held)
             errors[test] = np.abs(show(img[vi[test], ui[test]])
                                   - show(radiance[test])).mean(1)
-    return errors, u, v
+    return errors, u, v, z, hit
 
 
 def holdout_error(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
                   to_display=None, n_steps: int = 256) -> tuple[float, float]:
     """Mean of :func:`holdout_errors` over the rays that meet the surface in the image,
     and the fraction of rays that do."""
-    errors, _, _ = holdout_errors(o, d, radiance, totem, frame, depth, size,
-                                  to_display=to_display, n_steps=n_steps)
+    errors = holdout_errors(o, d, radiance, totem, frame, depth, size,
+                                  to_display=to_display, n_steps=n_steps)[0]
     seen = np.isfinite(errors)
     return (float(errors[seen].mean()) if seen.any() else float("inf")), float(seen.mean())
 

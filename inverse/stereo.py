@@ -30,7 +30,7 @@ from scipy import ndimage
 
 from inverse.camera import pixel_rays, project
 from inverse.grid import FrustumFrame
-from inverse.splat import error_map, holdout_errors, splat_image, surface_hits
+from inverse.splat import error_map, holdout_errors, splat_image
 from inverse.sweep import plane_sweep
 from scenes.render import linear_to_srgb
 
@@ -102,15 +102,15 @@ def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
                   sigma: float = 16.0, min_rays: float = 0.05) -> np.ndarray:
     """Per pixel, how much of the view comes from stereo (H, W) in [0, 1].
 
-    ``grid_errors``, ``stereo_errors``: (errors, u, v) of
+    ``grid_errors``, ``stereo_errors``: (errors, u, v, ...) of
     :func:`inverse.splat.holdout_errors` for each geometry. A pixel takes the geometry
     whose held-out rays landing nearby (Gaussian of ``sigma`` px) erred less; where
     either has fewer than ``min_rays`` such rays, the whole view's choice
     (``prefer_stereo``). The 0/1 choice is then smoothed (``sigma / 2``) so the two
     views meet without a seam.
     """
-    err_g, n_g = error_map(*grid_errors, size, sigma=sigma)
-    err_s, n_s = error_map(*stereo_errors, size, sigma=sigma)
+    err_g, n_g = error_map(*grid_errors[:3], size, sigma=sigma)
+    err_s, n_s = error_map(*stereo_errors[:3], size, sigma=sigma)
     known = (n_g > min_rays) & (n_s > min_rays)
     weight = np.where(known, err_s < err_g, prefer_stereo).astype(np.float64)
     return np.clip(ndimage.gaussian_filter(weight, sigma / 2), 0.0, 1.0)
@@ -168,7 +168,7 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     best = min(stereo_names, key=holdout.get)
     weight = stereo_weight(errors["grid"], errors[best], size,
                            prefer_stereo=chosen != "grid", sigma=sigma, min_rays=min_rays)
-    u, v, z, hit = surface_hits(o, d, frame, maps[best])
+    _, u, v, z, hit = errors[best]
     stereo_view = _display(splat_image(u, v, radiance, size, hit=hit))
     recon = weight[..., None] * stereo_view + (1 - weight[..., None]) * grid_view
     inside = hit & (u >= -0.5) & (u < W - 0.5) & (v >= -0.5) & (v < H - 0.5)
