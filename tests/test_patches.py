@@ -70,6 +70,41 @@ def test_heatmap_peaks_at_the_square():
     assert heat["SSIM"][inside].min() > 0.05
 
 
+def _blocks():
+    """A photo of flat coloured 20-px blocks, sRGB [0, 1]."""
+    rng = np.random.default_rng(3)
+    cells = rng.random((H // 20 + 1, W // 20 + 1, 3))
+    return np.kron(cells, np.ones((20, 20, 1)))[:H, :W]
+
+
+def test_chroma_distance_forgives_brightness_and_small_shifts():
+    photo = 0.8 * _blocks()
+    brighter = photo + 0.1                       # grey added: the chroma is unchanged
+    assert patches.chroma_distance(photo, brighter).max() < 1e-9
+    assert np.abs(photo - brighter).min() > 0.09                           # L1 is not
+    # the recon 3 px off: every blurred photo value lies in the recon's 16-px range
+    shifted = np.roll(photo, (3, -3), axis=(0, 1))
+    d = patches.chroma_distance(photo, shifted)
+    assert d[20:-20, 20:-20].max() < 1e-9
+    assert np.abs(photo - shifted).mean(axis=2)[20:-20, 20:-20].max() > 0.1
+
+
+def test_chroma_distance_finds_a_colour_that_is_not_there():
+    photo = np.full((H, W, 3), (0.5, 0.4, 0.3))
+    recon = photo.copy()
+    photo[60:100, 150:190] = (0.2, 0.5, 0.8)        # a blue square only the photo has
+    d = patches.chroma_distance(photo, recon)
+    # its chroma (-0.3, 0, 0.3) against the recon's (0.1, 0, -0.1): 0.8 / 3 at the centre
+    assert d[80, 170] == pytest.approx(0.8 / 3, rel=1e-6)
+    assert d[:40].max() < 1e-9 and d[:, :120].max() < 1e-9       # away from the square
+    # and the patch map peaks over the square
+    g = _grid()
+    heat = patches.heatmaps({"CHROMA": d}, g)["CHROMA"]
+    a, b = np.unravel_index(np.argmax(heat), heat.shape)
+    x0, y0, x1, y1 = g.box(a, b)
+    assert x0 <= 150 and x1 >= 190 and y0 <= 60 and y1 >= 100
+
+
 def test_patch_labels_use_more_than_ten_percent():
     g = _grid()
     a, b = 10, 10

@@ -31,6 +31,7 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
+from verify.patches import METRICS
 
 # The paper's figures (Tables 1 and 2 of the main text; supplementary for the totem study).
 PAPER_TABLE1 = {  # preset -> mode -> (recon L1, pose L1 in metres)
@@ -217,8 +218,8 @@ def summarise(runs: list[dict]) -> dict:
     for r in ok:
         if r["mode"] == "joint" and r["kind"] != "none":
             table2.setdefault(r["kind"], []).append(r)
-    table2 = {k: {"ap_L1": _mean(_metric(r, "patch_ap_L1") for r in rs),
-                  "ap_SSIM": _mean(_metric(r, "patch_ap_SSIM") for r in rs), "n": len(rs)}
+    table2 = {k: {**{f"ap_{name}": _mean(_metric(r, f"patch_ap_{name}") for r in rs)
+                     for name in METRICS}, "n": len(rs)}
               for k, rs in table2.items()}
     joint = [r for r in ok if r["mode"] == "joint"]
     untouched = [r for r in joint if r["kind"] == "none"]
@@ -276,12 +277,13 @@ def markdown(bench: dict) -> str:
             lines.append(f"| {preset} | {mode} | {_fmt(m['recon_L1'])} | {_fmt(paper[0])} "
                          f"| {_fmt(m['pose_L1'])} | {_fmt(paper[1])} | {m['n']} |")
     lines += ["", "## Table 2: patch AP per manipulation (joint fit)\n",
-              "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | n |",
-              "|---|---|---|---|---|---|"]
+              "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | AP (CHROMA) | n |",
+              "|---|---|---|---|---|---|---|"]
     for kind, m in sorted(s["table2"].items()):
         paper = PAPER_TABLE2.get(kind, (None, None))
         lines.append(f"| {kind} | {_fmt(m['ap_L1'])} | {_fmt(paper[0])} | "
-                     f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {m['n']} |")
+                     f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {_fmt(m.get('ap_CHROMA'))} "
+                     f"| {m['n']} |")
     a = s["accuracy"]
     lines += ["", "## Image level\n",
               f"- untouched judged consistent: {_fmt(a['untouched_consistent'], 2)} "
@@ -303,7 +305,7 @@ def markdown(bench: dict) -> str:
 
 
 CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
-              "threshold", "recon_L1", "pose_L1", "patch_ap_L1", "patch_ap_SSIM",
+              "threshold", "recon_L1", "pose_L1", "patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
               "wall_s", "fit_from", "error"]
 
 
@@ -341,11 +343,12 @@ def write_plots(summary: dict, out: Path) -> None:
         kinds = sorted(t2)
         x = np.arange(len(kinds))
         fig, ax = plt.subplots(figsize=(6, 3))
-        ax.bar(x - 0.2, [t2[k]["ap_L1"] or 0 for k in kinds], 0.4, label="L1")
-        ax.bar(x + 0.2, [t2[k]["ap_SSIM"] or 0 for k in kinds], 0.4, label="SSIM")
+        for i, name in enumerate(METRICS):
+            ax.bar(x + 0.27 * (i - 1), [t2[k].get(f"ap_{name}") or 0 for k in kinds], 0.27,
+                   label=name)
         paper = [(i, PAPER_TABLE2[k][0]) for i, k in enumerate(kinds) if k in PAPER_TABLE2]
         if paper:
-            ax.plot([i - 0.2 for i, _ in paper], [v for _, v in paper], "k_", ms=22,
+            ax.plot([i - 0.27 for i, _ in paper], [v for _, v in paper], "k_", ms=22,
                     mew=2, label="paper (L1)")
         ax.set_xticks(x, kinds)
         ax.set_ylim(0, 1)

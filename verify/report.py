@@ -18,7 +18,7 @@ from scenes import folder
 from scenes.errors import BadInput
 from verify import patches, region, verdict as verdict_mod
 
-VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5}
+VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1}
 """Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
 
 The pictures are scaled to the largest kept patch, as the NeRF path scales per image,
@@ -60,8 +60,8 @@ class Report:
         return self.decision.drivers
 
     def to_json(self) -> dict:
-        """report.json: the contract's fields plus ``drivers``, ``key_fingerprint`` and
-        ``region`` (the protected region's shape)."""
+        """report.json: the contract's fields plus ``drivers``, ``key_fingerprint``,
+        ``region`` (the protected region's shape) and ``metrics.patch_ap_CHROMA``."""
         return {
             "verdict": self.verdict,
             "score": _num(self.score),
@@ -153,8 +153,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     decision = verdict_mod.decide(inside["L1"], cover, grid, threshold=threshold,
                                   extra={"SSIM": inside["SSIM"]})
 
-    metrics = {"patch_ap_L1": None, "patch_ap_SSIM": None, "recon_L1": None,
-               "pose_L1": None}
+    metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
+               "recon_L1": None, "pose_L1": None}
     if scene.manip_mask is not None:
         labels = patches.patch_labels(scene.manip_mask, grid)
         for name in patches.METRICS:
