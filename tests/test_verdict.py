@@ -14,13 +14,33 @@ def test_score_is_the_excess_of_the_worst_patches_over_the_median():
     s = np.full((10, 10), 0.1)
     s[0, :3] = 0.5
     g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
-    d = verdict.decide(s, np.ones_like(s), g, threshold=0.3)
-    assert d.median == pytest.approx(0.1) and d.score == pytest.approx(0.4)
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.3})
+    assert d.medians["L1"] == pytest.approx(0.1) and d.scores["L1"] == pytest.approx(0.4)
+    assert d.score == pytest.approx(0.4 / 0.3) and d.threshold == 1.0
     assert d.verdict == "inconsistent"
     assert d.drivers and all(x["row"] == 0 and x["col"] < 3 for x in d.drivers)
-    assert all(x["excess"] == pytest.approx(0.4) for x in d.drivers)
-    d = verdict.decide(s, np.ones_like(s), g, threshold=0.45)
-    assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.4)
+    assert all(x["excess"] == pytest.approx(0.4 / 0.3, abs=1e-5) and x["metric"] == "L1"
+               for x in d.drivers)
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.45})
+    assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.4 / 0.45, abs=1e-5)
+
+
+def test_either_metric_over_its_threshold_decides():
+    # L1 flat (nothing), CHROMA high in one corner: inconsistent, driven by CHROMA
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    l1 = np.full((10, 10), 0.1)
+    chroma = np.full((10, 10), 0.01)
+    chroma[9, 7:] = 0.2
+    d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
+                       thresholds={"L1": 0.18, "CHROMA": 0.1})
+    assert d.scores["L1"] == pytest.approx(0.0) and d.scores["CHROMA"] == pytest.approx(0.19)
+    assert d.score == pytest.approx(1.9) and d.verdict == "inconsistent"
+    assert {(x["row"], x["col"]) for x in d.drivers} <= {(9, 7), (9, 8), (9, 9)}
+    assert all(x["metric"] == "CHROMA" and x["L1"] == pytest.approx(0.1) for x in d.drivers)
+    # the same patches under a CHROMA threshold above their excess: consistent
+    d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
+                       thresholds={"L1": 0.18, "CHROMA": 0.25})
+    assert d.verdict == "consistent" and d.score == pytest.approx(0.19 / 0.25)
 
 
 def test_noisy_recon_is_consistent():
@@ -29,7 +49,7 @@ def test_noisy_recon_is_consistent():
     recon = np.clip(photo + rng.normal(0, 0.01, photo.shape), 0, 1)
     rep = verify_scene(make_scene(photo), make_fit(recon))
     assert rep.verdict == "consistent"
-    assert rep.score < verdict.VERDICT_THRESHOLD / 4
+    assert rep.score < 0.25                    # a quarter of the way to the threshold
 
 
 def test_global_colour_offset_is_consistent():
@@ -43,21 +63,22 @@ def test_coloured_square_is_inconsistent_and_named():
     photo = texture()
     tampered = with_square(photo)
     rep = verify_scene(make_scene(tampered, box_mask(SQUARE)), make_fit(photo))
-    assert rep.verdict == "inconsistent" and rep.score > verdict.VERDICT_THRESHOLD
+    assert rep.verdict == "inconsistent" and rep.score > 1.0
     assert rep.drivers
     x0, y0, x1, y1 = SQUARE
     for d in rep.drivers:
         bx0, by0, bx1, by1 = d["box"]
         assert bx0 < x1 and bx1 > x0 and by0 < y1 and by1 > y0     # overlaps the square
-        assert d["excess"] > verdict.VERDICT_THRESHOLD
+        assert d["excess"] > 1.0
         assert rep.grid.box(d["row"], d["col"]) == d["box"]
-    assert rep.metrics["patch_ap_L1"] > 0.9 and rep.metrics["patch_ap_SSIM"] > 0.9
+    assert all(rep.metrics[f"patch_ap_{m}"] > 0.9 for m in patches.METRICS)
 
 
 def test_threshold_override_and_no_patches():
     photo = texture()
-    rep = verify_scene(make_scene(with_square(photo)), make_fit(photo), threshold=1e6)
-    assert rep.verdict == "consistent" and rep.threshold == 1e6
+    rep = verify_scene(make_scene(with_square(photo)), make_fit(photo),
+                       thresholds={"L1": 1e6, "CHROMA": 1e6})
+    assert rep.verdict == "consistent" and rep.decision.thresholds["L1"] == 1e6
     g = patches.patch_grid(make_scene().masks.any(axis=0))
     with pytest.raises(BadInput, match="cannot be verified"):
-        verdict.decide(np.ones((30, 30)), np.zeros((30, 30)), g)
+        verdict.decide({"L1": np.ones((30, 30))}, np.zeros((30, 30)), g)

@@ -305,8 +305,8 @@ def markdown(bench: dict) -> str:
 
 
 CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
-              "threshold", "recon_L1", "pose_L1", "patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
-              "wall_s", "fit_from", "error"]
+              "threshold", "score_L1", "score_CHROMA", "recon_L1", "pose_L1", "patch_ap_L1",
+              "patch_ap_SSIM", "patch_ap_CHROMA", "wall_s", "fit_from", "error"]
 
 
 def csv_text(runs: list[dict]) -> str:
@@ -314,7 +314,8 @@ def csv_text(runs: list[dict]) -> str:
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore")
     w.writeheader()
     for r in runs:
-        w.writerow({**r, **(r.get("metrics") or {})})
+        scores = {f"score_{m}": v.get("score") for m, v in (r.get("scores") or {}).items()}
+        w.writerow({**r, **(r.get("metrics") or {}), **scores})
     return buf.getvalue()
 
 

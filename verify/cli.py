@@ -221,8 +221,10 @@ def _print_summary(verb: str, summary: dict) -> None:
     if "verdict" in summary:
         m = summary.get("metrics", {})
         extras = ", ".join(f"{k} {v:.3f}" for k, v in m.items() if v is not None)
-        print(f"{summary['verdict']}: score {summary['score']:.3f} "
-              f"(threshold {summary['threshold']:.3f}); "
+        each = ", ".join(f"{k} {v['score']:.3f} of {v['threshold']:.3f}"
+                         for k, v in summary.get("scores", {}).items())
+        print(f"{summary['verdict']}: score {summary['score']:.2f} of "
+              f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
     else:

@@ -60,8 +60,10 @@ class Report:
         return self.decision.drivers
 
     def to_json(self) -> dict:
-        """report.json: the contract's fields plus ``drivers``, ``key_fingerprint``,
-        ``region`` (the protected region's shape) and ``metrics.patch_ap_CHROMA``."""
+        """report.json: the contract's fields plus ``scores`` (each metric's own score,
+        threshold and median patch; ``score`` is the largest score / threshold),
+        ``drivers``, ``key_fingerprint``, ``region`` (the protected region's shape) and
+        ``metrics.patch_ap_CHROMA``."""
         return {
             "verdict": self.verdict,
             "score": _num(self.score),
@@ -71,6 +73,9 @@ class Report:
             "metrics": {k: _num(v) for k, v in self.metrics.items()},
             "timing_s": {k: _num(v) for k, v in self.timing_s.items()},
             "versions": self.versions,
+            "scores": {m: {"score": _num(v), "threshold": _num(self.decision.thresholds[m]),
+                           "median": _num(self.decision.medians[m])}
+                       for m, v in self.decision.scores.items()},
             "drivers": self.drivers,
             "key_fingerprint": self.key_fingerprint,
             "region": self.region,
@@ -112,7 +117,7 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
 # --------------------------------------------------------------------------- verify
 
 def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
-                 threshold: float | None = None, versions: dict | None = None,
+                 thresholds: dict | None = None, versions: dict | None = None,
                  region_shape: str = "filled") -> Report:
     """Compare the photo with the fit's re-rendered camera view.
 
@@ -123,7 +128,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         ``totem_points`` (m, 3) camera frame m, ``centers`` (n, 3), ``initial`` (n, 3)
         or None, optional ``timings`` dict).
     truth : ground truth of a synthetic scene, for recon_L1 and pose_L1 (else null).
-    threshold : overrides ``verdict.VERDICT_THRESHOLD``.
+    thresholds : {metric: threshold} overriding ``verdict.THRESHOLDS``.
     versions : extra version info for the report (e.g. ``backend.describe()``).
     region_shape : "filled" (default) or "hull", the paper's protected region
         (:func:`verify.region.protected_region`).
@@ -150,8 +155,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
 
     # verdict on patch means restricted to protected, non-totem pixels (sRGB [0, 1])
     inside = {name: patches.patch_means(e, grid, seen) for name, e in errors.items()}
-    decision = verdict_mod.decide(inside["L1"], cover, grid, threshold=threshold,
-                                  extra={"SSIM": inside["SSIM"]})
+    decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None}
