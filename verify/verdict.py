@@ -133,19 +133,19 @@ def metric_score(patch_scores: np.ndarray, used: np.ndarray):
     return med, excess, float(np.sort(excess[used])[::-1][:k].mean())
 
 
-def decide(patch_scores: dict, cover: np.ndarray, grid, *, thresholds: dict | None = None,
-           extra: dict | None = None) -> Verdict:
+def decide(patch_scores: dict, cover: np.ndarray, grid, *,
+           thresholds: dict | None = None) -> Verdict:
     """The verdict from patch scores.
 
     Parameters
     ----------
     patch_scores : {metric: (G, G)} mean over each patch's protected non-totem pixels
         (NaN where a patch has none), for the metrics of ``THRESHOLDS`` (``L1``,
-        ``CHROMA``); a metric given without a threshold is listed beside the drivers.
+        ``CHROMA``); a metric without a threshold (e.g. SSIM) is only listed beside
+        each driver.
     cover : (G, G) fraction of each patch that is protected and not totem.
     grid : the :class:`verify.patches.PatchGrid` (for the drivers' pixel boxes).
     thresholds : {metric: threshold} overriding ``THRESHOLDS``.
-    extra : {name: (G, G)} other patch scores to list beside each driver (e.g. SSIM).
 
     Raises
     ------
@@ -171,9 +171,8 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *, thresholds: dict | No
     worst = np.where(used, ratios.argmax(axis=0), 0)
     score = max(scores[m] / float(thresholds[m]) for m in judged)
     verdict = "inconsistent" if score > 1.0 else "consistent"
-    listed = {**{m: patch_scores[m] for m in patch_scores}, **(extra or {})}
     limit = top_k(int(used.sum())) if verdict == "consistent" else MAX_DRIVERS
-    drivers = name_drivers(excess, used, grid, judged, worst, listed, limit)
+    drivers = name_drivers(excess, used, grid, judged, worst, patch_scores, limit)
     return Verdict(verdict, score, 1.0, scores, {m: float(thresholds[m]) for m in judged},
                    medians, excess, used, drivers)
 
