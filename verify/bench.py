@@ -282,7 +282,7 @@ def markdown(bench: dict) -> str:
     for kind, m in sorted(s["table2"].items()):
         paper = PAPER_TABLE2.get(kind, (None, None))
         lines.append(f"| {kind} | {_fmt(m['ap_L1'])} | {_fmt(paper[0])} | "
-                     f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {_fmt(m.get('ap_CHROMA'))} "
+                     f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {_fmt(m['ap_CHROMA'])} "
                      f"| {m['n']} |")
     a = s["accuracy"]
     lines += ["", "## Image level\n",
