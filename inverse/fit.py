@@ -73,7 +73,7 @@ from scenes.render import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
 
 FIT_FILES = ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
-             "totem_views.png", "fit.json", "totem_points.npy")
+             "totem_views.png", "fit.json", "totem_points.npy", "totem_rays.npz")
 
 
 @dataclass
@@ -131,6 +131,41 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     scene_fingerprint: str = ""
     geometry: dict = field(default_factory=dict)  # chosen geometry, hold-out errors
+    rays: "TotemRays | None" = None  # the totem pixels' rays leaving the glass
+
+
+@dataclass
+class TotemRays:
+    """The totem pixels as rays into the scene, at the fitted centres (camera frame).
+
+    What each totem pixel saw, with the glass undone: the ray leaves its sphere at
+    ``o`` (m, 3) metres in direction ``d`` (m, 3, unit) and brought back the linear RGB
+    ``radiance`` (m, 3), the pixel's colour with the front reflection taken off and
+    divided by the Fresnel transmittance. ``totem`` (m,) is the sphere each left,
+    ``cos_in`` (m,) the incidence cosine at its surface (rim rays near 0). Only rays
+    that pass through the glass with transmittance above 5 % are kept. It holds no
+    colour but the totem pixels' and reveals no key beyond what the centres do.
+    """
+
+    o: np.ndarray
+    d: np.ndarray
+    radiance: np.ndarray
+    totem: np.ndarray
+    cos_in: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"o": self.o.astype(np.float32), "d": self.d.astype(np.float32),
+                "radiance": self.radiance.astype(np.float32),
+                "totem": self.totem.astype(np.int32), "cos_in": self.cos_in.astype(np.float32)}
+
+    @classmethod
+    def from_dict(cls, z) -> "TotemRays":
+        m = len(z["totem"])
+        arrays = {k: np.asarray(z[k], np.float64) for k in ("o", "d", "radiance", "cos_in")}
+        if any(a.shape[0] != m for a in arrays.values()) or arrays["o"].shape != (m, 3) \
+                or arrays["d"].shape != (m, 3) or arrays["radiance"].shape != (m, 3):
+            raise ValueError("totem_rays arrays disagree in shape")
+        return cls(totem=np.asarray(z["totem"], np.int64), **arrays)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -429,13 +464,14 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                                 np.asarray(g1), itg.n_samples, np.asarray(valid, bool))
     t_render = time.perf_counter() - t0
 
+    rays = exit_rays(itg, centers, radius, d_cam, jt, observed, refl_np,
+                     np.maximum(np.asarray(ambient, np.float64), 0.0))
+
     # ---- the grid's geometry against plane-sweep stereo, judged on held-out totems
     t0 = time.perf_counter()
     geometry = {"chosen": "grid", "holdout_L1": {}}
     if settings.stereo:
-        view = _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed,
-                            refl_np, np.maximum(np.asarray(ambient, np.float64), 0.0),
-                            recon, totem_points, (W, H), settings)
+        view = _stereo_view(rays, frame, density, recon, totem_points, (W, H), settings)
         geometry = {"chosen": view.chosen, "stereo_share": round(view.stereo_share, 4),
                     "holdout_L1": {k: round(float(e), 5) for k, e in view.holdout.items()}}
         recon, depth, totem_points = view.recon, view.depth, view.points
@@ -467,7 +503,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
-                     scene_fingerprint=scene_fingerprint(scene), geometry=geometry)
+                     scene_fingerprint=scene_fingerprint(scene), geometry=geometry,
+                     rays=rays)
 
 
 def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, observed,
@@ -506,18 +543,27 @@ def column_depth(density, frame: FrustumFrame) -> np.ndarray:
     return 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
 
 
-def _stereo_view(itg, frame, density, centers, radius, d_cam, jt, observed, refl,
-                 ambient, grid_view, grid_points, size, settings):
-    """:func:`inverse.stereo.choose_view` on the totem rays at the final centres."""
-    from inverse.stereo import choose_view
+def exit_rays(itg, centers, radius, d_cam, jt, observed, refl, ambient) -> TotemRays:
+    """The totem pixels' rays leaving the glass at the integrator's centres.
 
+    ``observed`` (m, 3) sRGB of the pixels whose camera rays are ``d_cam`` (m, 3) into
+    totems ``jt``; ``refl`` (m,) their front-surface Fresnel reflectance and ``ambient``
+    (3,) the fitted linear colour it reflects. See :class:`TotemRays`.
+    """
     o, d, T, ok = _totem_rays_np(itg, d_cam, jt)
     keep = ok & (T > 0.05)
     P = np.asarray(centers, np.float64)[jt]
     cos_in = np.abs(((o - P) * d).sum(1)) / np.asarray(radius, np.float64)[jt]
     lin = np.clip(srgb_to_linear(observed) - refl[:, None] * ambient[None], 0.0, None)
     lin = lin / np.maximum(T, 0.05)[:, None]
-    return choose_view(o[keep], d[keep], lin[keep], jt[keep], cos_in[keep], frame,
+    return TotemRays(o[keep], d[keep], lin[keep], np.asarray(jt)[keep], cos_in[keep])
+
+
+def _stereo_view(rays: TotemRays, frame, density, grid_view, grid_points, size, settings):
+    """:func:`inverse.stereo.choose_view` on the totem rays at the final centres."""
+    from inverse.stereo import choose_view
+
+    return choose_view(rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame,
                        column_depth(density, frame), grid_view, grid_points, size,
                        res=settings.stereo_res, n_slices=settings.stereo_slices,
                        far_biases=settings.stereo_far_biases)
@@ -612,7 +658,8 @@ def _totem_views(scene_image, totem_pred, masks) -> np.ndarray:
 
 
 def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) -> None:
-    """Write the fit/ files of the contract (plus ``totem_points.npy``), each atomically.
+    """Write the fit/ files of the contract (plus ``totem_points.npy`` and
+    ``totem_rays.npz``), each atomically.
 
     ``totem_views.png`` shows observed over fitted totem pixels when ``scene`` is given,
     else the fitted totem pixels alone.
@@ -627,6 +674,8 @@ def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) 
         grid["recon_depth"] = np.asarray(result.recon_depth, np.float32)
     grid["totem_pred"] = np.asarray(result.totem_pred, np.float32)
     folder.write_npz(out / "grid.npz", **grid)
+    if result.rays is not None:
+        folder.write_npz(out / "totem_rays.npz", **result.rays.to_dict())
     folder.write_image(out / "recon.png", result.recon)
     if scene is not None:
         views = _totem_views(scene.image, result.totem_pred, scene.masks)
@@ -678,12 +727,20 @@ def load_fit(fit_dir) -> FitResult:
     totem_pred = grid.pop("totem_pred", None)
     if totem_pred is None:
         totem_pred = np.zeros_like(recon)
+    rays = None
+    if (d / "totem_rays.npz").is_file():       # fits written before it have none
+        try:
+            with np.load(d / "totem_rays.npz", allow_pickle=False) as z:
+                rays = TotemRays.from_dict(z)
+        except Exception as exc:
+            raise BadInput(f"{d / 'totem_rays.npz'} is unreadable "
+                           f"({exc.__class__.__name__}): run `totems fit` again") from None
     return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
                      totem_points=points, totem_pred=totem_pred, grid=grid,
                      history=meta.get("history", {}), timings=meta.get("timings", {}),
                      settings=meta.get("settings", {}),
                      scene_fingerprint=str(meta.get("scene_fingerprint", "")),
-                     geometry=meta.get("geometry", {}))
+                     geometry=meta.get("geometry", {}), rays=rays)
 
 
 def render_grid(grid: dict, size, *, n: int = 128):

@@ -228,6 +228,15 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
     assert back.scene_fingerprint == fit.scene_fingerprint(scene)
+    # The totem rays verify reads leave the fitted spheres outwards, unit, and come back.
+    rays = back.rays
+    P = r.centers[rays.totem]
+    assert np.allclose(np.linalg.norm(rays.o - P, axis=1), scene.radius[rays.totem],
+                       atol=1e-5)
+    assert np.allclose(np.linalg.norm(rays.d, axis=1), 1.0, atol=1e-5)
+    assert np.all(((rays.o - P) * rays.d).sum(1) > 0)
+    assert np.allclose(rays.radiance, r.rays.radiance, atol=1e-6)
+    assert set(np.unique(rays.totem)) == set(range(len(r.centers)))      # every totem
     # The view comes from the geometry the held-out totems preferred.
     assert back.geometry == r.geometry
     held = r.geometry["holdout_L1"]
