@@ -20,6 +20,8 @@ Public functions
 ----------------
 ``slice_depths(frame, n) -> (n,) z`` metres, slice centres even in inverse depth;
 ``plane_sweep(o, d, colour, totem, frame, res, *, ...) -> SweepResult``;
+``slice_colours(o, d, colour, totem, frame, res, *, ...) -> SliceColours`` what each
+totem sees at each slice (the sweep's first half);
 ``semi_global(cost, p1, p2) -> cost`` aggregation of a (slices, rows, cols) volume;
 ``pull_push(values, weight) -> values`` hole filling of a 2-D map.
 """
@@ -161,6 +163,59 @@ def semi_global(cost: np.ndarray, p1: float, p2: float) -> np.ndarray:
     return np.moveaxis(total, -1, 0)
 
 
+@dataclass
+class SliceColours:
+    """What each totem sees at each depth slice, over an ``(nt, ns)`` map of grid columns.
+
+    Attributes
+    ----------
+    colour : (n_tot, n_slices, nt, ns, C) the mean colour of totem j's rays that cross
+        slice k inside the cell (spread by the Gaussian), where ``land``.
+    land : (n_tot, n_slices, nt, ns) bool, totem j has rays there.
+    weight : (n_tot, n_slices, nt, ns) their spread splat weight.
+    z : (n_slices,) slice depths, metres.
+    peak : one ray's peak spread weight (``weight / peak`` counts rays).
+    """
+
+    colour: np.ndarray
+    land: np.ndarray
+    weight: np.ndarray
+    z: np.ndarray
+    peak: float
+
+
+def slice_colours(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
+                  sigma: float | None = 1.5, min_weight: float = 0.3) -> SliceColours:
+    """Every totem's rays cut with every depth slice and projected into the camera.
+
+    Parameters as :func:`plane_sweep`: rays ``o``, ``d`` (m, 3) camera frame, metres;
+    ``colour`` (m, C); ``totem`` (m,); the map's ``res`` (nt, ns); ``sigma`` in cells
+    (None: from the ray density, about 4 rays of a totem inside one sigma disc); a totem
+    lands in a cell where its spread weight exceeds ``min_weight`` of one ray's peak.
+    """
+    o = np.asarray(o, np.float64)
+    d = np.asarray(d, np.float64)
+    colour = np.asarray(colour, np.float64)
+    totem = np.asarray(totem, np.int64)
+    nt, ns = int(res[0]), int(res[1])
+    n_tot = int(totem.max()) + 1 if totem.size else 1
+    z = slice_depths(frame, n_slices)
+    wsum, csum = _splat(o, d, colour, totem, frame, z, (nt, ns), n_tot)
+    if sigma is None:
+        # Rays of one totem per cell at the middle slice -> sigma holding ~4 rays.
+        per_cell = wsum[:, n_slices // 2].sum((1, 2)) / (nt * ns)
+        rho = max(float(np.median(per_cell[per_cell > 0])) if np.any(per_cell > 0)
+                  else 1e-3, 1e-3)
+        sigma = float(np.clip(np.sqrt(4.0 / (np.pi * rho)), 0.5, 4.0))
+    ax = (0, 0, sigma, sigma)
+    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant", truncate=2.5)
+    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant", truncate=2.5)
+    peak = 1.0 / (2 * np.pi * sigma ** 2)
+    land = wsum > min_weight * peak
+    mu = csum / np.maximum(wsum, 1e-12)[..., None]
+    return SliceColours(mu, land, wsum, z, peak)
+
+
 def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
                 sigma: float | None = 1.5, min_weight: float = 0.3, p1: float = 0.3,
                 p2: float = 3.0, far_bias: float = 0.0) -> SweepResult:
@@ -192,26 +247,9 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     cost (a fixed penalty there would favour depths where the totems' footprints
     overlap, not where they agree).
     """
-    o = np.asarray(o, np.float64)
-    d = np.asarray(d, np.float64)
-    colour = np.asarray(colour, np.float64)
-    totem = np.asarray(totem, np.int64)
-    nt, ns = int(res[0]), int(res[1])
-    n_tot = int(totem.max()) + 1 if totem.size else 1
-    z = slice_depths(frame, n_slices)
-    wsum, csum = _splat(o, d, colour, totem, frame, z, (nt, ns), n_tot)
-    if sigma is None:
-        # Rays of one totem per cell at the middle slice -> sigma holding ~4 rays.
-        per_cell = wsum[:, n_slices // 2].sum((1, 2)) / (nt * ns)
-        rho = max(float(np.median(per_cell[per_cell > 0])) if np.any(per_cell > 0)
-                  else 1e-3, 1e-3)
-        sigma = float(np.clip(np.sqrt(4.0 / (np.pi * rho)), 0.5, 4.0))
-    ax = (0, 0, sigma, sigma)
-    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant", truncate=2.5)
-    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant", truncate=2.5)
-    peak = 1.0 / (2 * np.pi * sigma ** 2)
-    land = wsum > min_weight * peak
-    mu = csum / np.maximum(wsum, 1e-12)[..., None]
+    sc = slice_colours(o, d, colour, totem, frame, res, n_slices=n_slices, sigma=sigma,
+                       min_weight=min_weight)
+    wsum, land, mu, z, peak = sc.weight, sc.land, sc.colour, sc.z, sc.peak
     n_land = land.sum(0)                                         # (nk, nt, ns)
     lw = land.astype(np.float64)
     mean = (lw[..., None] * mu).sum(0) / np.maximum(n_land, 1)[..., None]
