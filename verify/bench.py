@@ -219,7 +219,8 @@ def summarise(runs: list[dict]) -> dict:
         if r["mode"] == "joint" and r["kind"] != "none":
             table2.setdefault(r["kind"], []).append(r)
     table2 = {k: {**{f"ap_{name}": _mean(_metric(r, f"patch_ap_{name}") for r in rs)
-                     for name in METRICS}, "n": len(rs)}
+                     for name in METRICS},
+                  "flagged": sum(r["verdict"] == "inconsistent" for r in rs), "n": len(rs)}
               for k, rs in table2.items()}
     joint = [r for r in ok if r["mode"] == "joint"]
     untouched = [r for r in joint if r["kind"] == "none"]
@@ -277,13 +278,15 @@ def markdown(bench: dict) -> str:
             lines.append(f"| {preset} | {mode} | {_fmt(m['recon_L1'])} | {_fmt(paper[0])} "
                          f"| {_fmt(m['pose_L1'])} | {_fmt(paper[1])} | {m['n']} |")
     lines += ["", "## Table 2: patch AP per manipulation (joint fit)\n",
-              "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | AP (CHROMA) | n |",
-              "|---|---|---|---|---|---|---|"]
+              "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | AP (CHROMA) "
+              "| AP (CORROB) | AP (UNSEEN) | flagged | n |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for kind, m in sorted(s["table2"].items()):
         paper = PAPER_TABLE2.get(kind, (None, None))
         lines.append(f"| {kind} | {_fmt(m['ap_L1'])} | {_fmt(paper[0])} | "
                      f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {_fmt(m['ap_CHROMA'])} "
-                     f"| {m['n']} |")
+                     f"| {_fmt(m.get('ap_CORROB'))} | {_fmt(m.get('ap_UNSEEN'))} "
+                     f"| {m.get('flagged', '–')} | {m['n']} |")
     a = s["accuracy"]
     lines += ["", "## Image level\n",
               f"- untouched judged consistent: {_fmt(a['untouched_consistent'], 2)} "
@@ -305,8 +308,9 @@ def markdown(bench: dict) -> str:
 
 
 CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
-              "threshold", "score_L1", "score_CHROMA", "recon_L1", "pose_L1", "patch_ap_L1",
-              "patch_ap_SSIM", "patch_ap_CHROMA", "wall_s", "fit_from", "error"]
+              "threshold", "score_L1", "score_UNSEEN", "recon_L1", "pose_L1", "patch_ap_L1",
+              "patch_ap_SSIM", "patch_ap_CHROMA", "patch_ap_CORROB", "patch_ap_UNSEEN",
+              "wall_s", "fit_from", "error"]
 
 
 def csv_text(runs: list[dict]) -> str:
@@ -343,13 +347,15 @@ def write_plots(summary: dict, out: Path) -> None:
     if t2:
         kinds = sorted(t2)
         x = np.arange(len(kinds))
-        fig, ax = plt.subplots(figsize=(6, 3))
+        fig, ax = plt.subplots(figsize=(7, 3))
+        bar = 0.8 / len(METRICS)
+        offset = [bar * (i - (len(METRICS) - 1) / 2) for i in range(len(METRICS))]
         for i, name in enumerate(METRICS):
-            ax.bar(x + 0.27 * (i - 1), [t2[k].get(f"ap_{name}") or 0 for k in kinds], 0.27,
+            ax.bar(x + offset[i], [t2[k].get(f"ap_{name}") or 0 for k in kinds], bar,
                    label=name)
         paper = [(i, PAPER_TABLE2[k][0]) for i, k in enumerate(kinds) if k in PAPER_TABLE2]
         if paper:
-            ax.plot([i - 0.27 for i, _ in paper], [v for _, v in paper], "k_", ms=22,
+            ax.plot([i + offset[0] for i, _ in paper], [v for _, v in paper], "k_", ms=14,
                     mew=2, label="paper (L1)")
         ax.set_xticks(x, kinds)
         ax.set_ylim(0, 1)

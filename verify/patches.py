@@ -20,6 +20,13 @@ heatmaps compare one to one:
   shows within ``CHROMA_RADIUS_PX``, sRGB [0, 1]. It ignores the two errors a
   reconstruction from the totems makes everywhere (brightness, and edges a few pixels
   off) and keeps the one an edit makes (a colour that is not there).
+- ``CORROB/heatmap.npy`` (ours) is the patch mean of
+  :func:`verify.corroborate.corroboration`: how far the photo's hue is from what two
+  totems saw at the best depth along the pixel's ray, sRGB [0, 1]; it needs no
+  reconstruction, only the totem rays.
+- ``UNSEEN/heatmap.npy`` (ours, the verdict's) is the patch mean of
+  :func:`verify.corroborate.unseen`, per pixel the smaller of CHROMA and CORROB: a hue
+  that neither the rebuilt view nor the totem rays explain.
 
 Heatmaps hold all 900 patches, as the NeRF path's; which patches are *kept* (overlap the
 protected region) is a separate array. Totem pixels never enter a patch mean (above the
@@ -68,7 +75,9 @@ CHROMA_BLUR_PX = 3.0
 detail finer than its totem rays' spacing (about 3 px at 640x480), so neither should the
 photo it is compared with."""
 
-METRICS = ("L1", "SSIM", "CHROMA")
+METRICS = ("L1", "SSIM", "CHROMA", "CORROB", "UNSEEN")
+"""Every heatmap verify writes; CORROB (:mod:`verify.corroborate`) needs the fit's
+totem rays and is absent for a fit written without them (UNSEEN is then CHROMA's)."""
 
 
 @dataclass(frozen=True)
@@ -143,12 +152,16 @@ def patch_fraction(mask: np.ndarray, grid: PatchGrid) -> np.ndarray:
 
 
 def patch_means(values: np.ndarray, grid: PatchGrid, weights=None) -> np.ndarray:
-    """Mean of ``values`` (H, W) over each patch, counting only pixels where ``weights``.
+    """Mean of ``values`` (H, W) over each patch, counting only pixels where ``weights``
+    and where the value is finite (NaN: not known there).
 
     Returns (G, G) float64, NaN for a patch with no counted pixel.
     """
     values = np.asarray(values, dtype=np.float64)
     w = np.ones(values.shape) if weights is None else np.asarray(weights, np.float64)
+    known = np.isfinite(values)
+    w = np.where(known, w, 0.0)
+    values = np.where(known, values, 0.0)
     num = _box_sums(values * w, grid)
     den = _box_sums(w, grid)
     with np.errstate(invalid="ignore", divide="ignore"):

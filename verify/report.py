@@ -16,9 +16,9 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
-from verify import patches, region, verdict as verdict_mod
+from verify import corroborate, patches, region, verdict as verdict_mod
 
-VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1}
+VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "CORROB": 0.1, "UNSEEN": 0.1}
 """Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
 
 The pictures are scaled to the largest kept patch, as the NeRF path scales per image,
@@ -148,6 +148,14 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                                         shape=region_shape)
     grid = patches.patch_grid(totem_mask)
     errors = patches.pixel_errors(image, recon)
+    rays = getattr(fit, "rays", None)
+    if rays is not None:
+        from inverse.grid import FrustumFrame
+        errors["CORROB"] = corroborate.corroboration(
+            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in,
+            FrustumFrame.from_dict(fit.grid), image)
+    errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
+                                          errors.get("CORROB", np.nan))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     seen = protected & ~totem_mask
     cover = patches.patch_fraction(seen, grid)
@@ -161,7 +169,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                "recon_L1": None, "pose_L1": None}
     if scene.manip_mask is not None:
         labels = patches.patch_labels(scene.manip_mask, grid)
-        for name in patches.METRICS:
+        for name in heat:
             metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
     if truth is not None:
         clean = np.asarray(truth.clean, dtype=np.float64)

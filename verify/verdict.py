@@ -141,7 +141,7 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     patch_scores : {metric: (G, G)} mean over each patch's protected non-totem pixels
         (NaN where a patch has none), for the metrics of ``THRESHOLDS`` (``L1``,
         ``CHROMA``); a metric without a threshold (e.g. SSIM) is only listed beside
-        each driver.
+        each driver. Each metric judges the patches it has a value for.
     cover : (G, G) fraction of each patch that is protected and not totem.
     grid : the :class:`verify.patches.PatchGrid` (for the drivers' pixel boxes).
     thresholds : {metric: threshold} overriding ``THRESHOLDS``.
@@ -155,17 +155,20 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     judged = list(limits)
     if not judged:
         raise ValueError(f"no patch scores for any of {sorted(thresholds)}")
-    finite = np.logical_and.reduce([np.isfinite(patch_scores[m]) for m in judged])
-    used = finite & (cover >= MIN_COVER)
-    if not used.any():
-        used = finite & (cover > 0)
-    if not used.any():
+    # Each metric judges the patches it has a value for (CORROB has none where too few
+    # totems see).
+    used_by = {m: np.isfinite(patch_scores[m]) & (cover >= MIN_COVER) for m in judged}
+    if not any(u.any() for u in used_by.values()):
+        used_by = {m: np.isfinite(patch_scores[m]) & (cover > 0) for m in judged}
+    judged = [m for m in judged if used_by[m].any()]
+    if not judged:
         raise BadInput("the protected region does not reach the image above the totems; "
                        "this photo cannot be verified (move the totems lower or nearer)")
+    used = np.logical_or.reduce([used_by[m] for m in judged])
     medians, scores, ratios = {}, {}, []
     for m in judged:
-        medians[m], excess_m, scores[m] = metric_score(patch_scores[m], used)
-        ratios.append(excess_m / limits[m])
+        medians[m], excess_m, scores[m] = metric_score(patch_scores[m], used_by[m])
+        ratios.append(np.where(used_by[m], excess_m / limits[m], -np.inf))
     ratios = np.stack(ratios)
     excess = np.where(used, ratios.max(axis=0), np.nan)
     worst = np.where(used, ratios.argmax(axis=0), 0)
@@ -200,7 +203,7 @@ def name_drivers(excess, used, grid, metrics, worst, listed, limit) -> list[dict
         d = {"row": int(a), "col": int(b), "box": box,
              "excess": round(float(excess[a, b]), 5), "metric": metrics[int(worst[a, b])]}
         for name, h in listed.items():
-            d[name] = round(float(h[a, b]), 5)
+            d[name] = round(float(h[a, b]), 5) if np.isfinite(h[a, b]) else None
         out.append(d)
     return out
 
