@@ -4,7 +4,7 @@
 
 Runs the real `totems` commands (printed as they run), so the demo is also a tutorial.
 The picture, OUT/demo.png: the untouched and the tampered photo, the camera view
-re-rendered from the totems alone, what was changed, and the CHROMA heatmap over each
+re-rendered from the totems alone, what was changed, and the UNSEEN heatmap over each
 photo with its verdict.
 """
 
@@ -27,13 +27,13 @@ def run(*args) -> int:
 
 
 def _verdict(scene: Path) -> str:
-    """'consistent\nL1 0.11 of 0.18, CHROMA 0.01 of 0.05' from the scene's report.json,
+    """'consistent\nL1 0.129 of 0.375, UNSEEN 0.003 of 0.044' from the scene's report.json,
     or ''."""
     path = scene / "totems-out/verify/report.json"
     if not path.is_file():
         return ""
     r = json.loads(path.read_text())
-    each = ", ".join(f"{k} {v['score']:.2f} of {v['threshold']:.2f}"
+    each = ", ".join(f"{k} {v['score']:.3f} of {v['threshold']:.3f}"
                      for k, v in r.get("scores", {}).items())
     return f"{r['verdict']}\n{each}"
 
@@ -46,13 +46,13 @@ def picture(untouched: Path, tampered: Path, out: Path) -> None:
 
     panels = [(untouched / "image.png", "untouched photo"),
               (untouched / "totems-out/verify/recon.png", "re-rendered from the totems"),
-              (untouched / "totems-out/verify/CHROMA/heatmap_overlay.png",
+              (untouched / "totems-out/verify/UNSEEN/heatmap_overlay.png",
                "untouched: " + _verdict(untouched)),
               (tampered / "image.png", "tampered photo"),
               (tampered / "manip_mask.png", "what was changed"),
-              (tampered / "totems-out/verify/CHROMA/heatmap_overlay.png",
+              (tampered / "totems-out/verify/UNSEEN/heatmap_overlay.png",
                "tampered: " + _verdict(tampered))]
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6.8))
+    fig, axes = plt.subplots(2, 3, figsize=(12, 7.4))
     for ax, (path, title) in zip(axes.ravel(), panels):
         if path.is_file():
             ax.imshow(read_image(path))

@@ -347,7 +347,7 @@ def write_plots(summary: dict, out: Path) -> None:
     if t2:
         kinds = sorted(t2)
         x = np.arange(len(kinds))
-        fig, ax = plt.subplots(figsize=(7, 3))
+        fig, ax = plt.subplots(figsize=(8, 3))
         bar = 0.8 / len(METRICS)
         offset = [bar * (i - (len(METRICS) - 1) / 2) for i in range(len(METRICS))]
         for i, name in enumerate(METRICS):
@@ -360,7 +360,7 @@ def write_plots(summary: dict, out: Path) -> None:
         ax.set_xticks(x, kinds)
         ax.set_ylim(0, 1)
         ax.set_ylabel("patch AP")
-        ax.legend()
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
         save(fig, "ap_per_kind.png")
     t1 = summary["table1"]
     if t1:

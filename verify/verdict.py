@@ -4,7 +4,7 @@ Two metrics each give a score: how much worse the worst patches are than the ima
 typical patch, in the metric's units (sRGB [0, 1]):
 
     s_p      patch mean over the patch's protected, non-totem pixels of the metric
-             (L1: |I - C|; CHROMA: :func:`verify.patches.chroma_distance`), for the
+             (L1: |I - C|; UNSEEN: :func:`verify.corroborate.unseen`), for the
              patches mostly inside the protected region
     med      median of s_p over those patches: the reconstruction's own error for this
              scene (blur, grid resolution, parts seen by one totem only)
@@ -12,14 +12,16 @@ typical patch, in the metric's units (sRGB [0, 1]):
 
 The photo is *inconsistent* when either metric's score exceeds its threshold
 (``THRESHOLDS``); the reported ``score`` is the larger ``score_m / threshold_m``, so
-1 is the line. L1 sees any change of brightness or colour; CHROMA sees a colour that
-the reconstruction does not show nearby, and forgives the reconstruction's blur and
-brightness. Subtracting the median makes a global colour/exposure offset between photo
-and recon harmless and follows the scene's reconstruction quality. The excess stays in absolute units (no
-division by the spread of s_p) because the spread is dominated by the reconstruction's
-own bad parts (a high-contrast wall, a bright environment map): a robust z (excess over
-1.4826 MAD) hid a pasted colour patch on a 640 x 480 box scene (4.45 tampered against
-4.64 untouched), where the excess is 0.27 against 0.10.
+1 is the line. L1 sees any change of brightness or colour against the rebuilt view;
+UNSEEN sees a hue that neither the rebuilt view shows nearby nor two totems see at one
+depth along the pixel's ray, and forgives the view's blur, brightness and misplaced
+geometry. The other heatmaps (SSIM, CHROMA, CORROB) are listed beside each driver.
+Subtracting the median makes a global colour/exposure offset between photo and recon
+harmless and follows the scene's reconstruction quality. The excess stays in absolute
+units (no division by the spread of s_p) because the spread is dominated by the
+reconstruction's own bad parts (a high-contrast wall, a bright environment map): a
+robust z (excess over 1.4826 MAD) hid a pasted colour patch on a 640 x 480 box scene
+(4.45 tampered against 4.64 untouched), where the excess is 0.27 against 0.10.
 Limits: an edit covering more than about half of the protected region moves the median
 itself and is under-scored; an edit outside the protected region is never seen; an edit
 much smaller than a patch is diluted by the patch's untouched pixels.
@@ -34,45 +36,35 @@ import numpy as np
 
 from scenes.errors import BadInput
 
-L1_THRESHOLD = 0.18
+L1_THRESHOLD = 0.375
 """Score (sRGB L1 excess of the worst patches over the median patch) above which a photo
-is reported inconsistent.
+is reported inconsistent: a guard against gross brightness edits (a grey, black or white
+patch has no hue for UNSEEN to see), set by the same rule as ``UNSEEN_THRESHOLD``.
 
-Aim: no false alarm on untouched photos fitted with the default settings. Calibrated on
-untouched scenes from `totems scene make` fitted by `totems fit` (box and envmap, 320 x 240
-and 640 x 480, seeds 1-3): most scored 0.045-0.167, and the threshold sits just above.
-Measured with it on the 640 x 480 benchmark (3 box + 3 envmap seeds, 2026-11-22):
-untouched 0.081-0.147, except box seed 3 at 0.336 (the top of its back wall, seen only
-at grazing angles through the totems, is reconstructed white: a false alarm, 1 of 6);
-colour patches and splices 0.15-0.33, flagged in 10 of 12 (on box seed 3 only because
-its untouched photo already is; both missed on envmap seed 3, whose untouched score is
-already 0.147); inpainting and the perfect forger's removal stay at the untouched level
-(not caught). After the fit left out totem rays that exit through the grid's top face,
-the same untouched photos of box seeds 1-3 and envmap seed 3 scored 0.084-0.143 (no false
-alarm). On the standard set (box and envmap seeds 1-5, 640 x 480, 68 scenes): untouched
-0.081-0.143 except envmap seed 4 at 0.200 (two patches at the left edge of the protected
-region, floor seen at grazing angles: 1 false alarm in 10); colour patches flagged in 6 of
-10, splices 8 of 10. Left at 0.18 rather than raised to the set's own maximum: the set
-is the test, not the calibration. Rerun ``benchmarks/`` and recalibrate when the fit
-changes.
+Held-out untouched scenes (box and envmap seeds 11-18, 640 x 480, 2026-12-01) scored
+0.059-0.300 (envmap seed 18 0.300, box seed 17 0.195: their rebuilt views are poor,
+recon L1 0.19 and 0.18), so the earlier 0.18 (calibrated on seeds 1-3 when recon L1 was
+the only metric) raised 2 false alarms in 16; the threshold sits a quarter above the
+largest. On the standard set (box and envmap seeds 1-5) no edit scores above it (the
+largest, a colour patch on box seed 1, 0.352): every edit flagged there is UNSEEN's.
 """
 
-CHROMA_THRESHOLD = 0.05
-"""CHROMA score (sRGB chroma distance excess of the worst patches over the median patch)
-above which a photo is reported inconsistent.
+UNSEEN_THRESHOLD = 0.044
+"""UNSEEN score (excess of the worst patches' :func:`verify.corroborate.unseen` distance
+over the median patch, sRGB) above which a photo is reported inconsistent.
 
-Aim: about one false alarm in twenty untouched photos, for half again as many
-manipulated photos caught. Calibrated on untouched scenes kept apart from the benchmark
-(box and envmap seeds 11-14, 640 x 480, fitted by `totems fit`, 2026-11-22): 0.004-0.039
-(box 0.004-0.032, envmap 0.019-0.039); the threshold sits a quarter above the largest.
-L1 scored 0.059-0.180 on the same photos (0.1801 for box seed 14 with the true poses,
-just over its threshold). Measured on the standard set's saved fits (box and envmap seeds
-1-5): untouched 0.001-0.040 except envmap seed 5 at 0.070 (three objects the fitted grid
-did not place, seen small in the totems: a false alarm, 1 in 10); with either metric
-deciding, the bench flagged 26 of 58 manipulated photos instead of 19 by L1 alone.
+Aim: no false alarm on untouched photos, about one in twenty at most. Calibrated on 16
+untouched scenes kept apart from the benchmark (box and envmap seeds 11-18, 640 x 480,
+fitted by `totems fit`, 2026-12-01): 0.0016-0.0353 (box at most 0.0064, envmap
+0.0086-0.0353, envmap seed 13 the largest); the threshold sits a quarter above the
+largest. CHROMA alone, which the verdict judged before, scored up to 0.0554 there
+(envmap seed 17, over its threshold of 0.05) and 0.070 on the standard set's envmap
+seed 5; UNSEEN scored at most 0.028 on the standard set's untouched photos.
+Measured on the standard set (2026-12-01, 10 untouched, 50 edits): no false alarm, 20 of
+50 edits flagged (colour 10, splice 7, insert 3).
 """
 
-THRESHOLDS = {"L1": L1_THRESHOLD, "CHROMA": CHROMA_THRESHOLD}
+THRESHOLDS = {"L1": L1_THRESHOLD, "UNSEEN": UNSEEN_THRESHOLD}
 """The metrics that judge the photo and their thresholds: either one over it is enough."""
 
 TOP_K_FRACTION = 0.01
@@ -140,7 +132,7 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     ----------
     patch_scores : {metric: (G, G)} mean over each patch's protected non-totem pixels
         (NaN where a patch has none), for the metrics of ``THRESHOLDS`` (``L1``,
-        ``CHROMA``); a metric without a threshold (e.g. SSIM) is only listed beside
+        ``UNSEEN``); a metric without a threshold (e.g. SSIM) is only listed beside
         each driver. Each metric judges the patches it has a value for.
     cover : (G, G) fraction of each patch that is protected and not totem.
     grid : the :class:`verify.patches.PatchGrid` (for the drivers' pixel boxes).
