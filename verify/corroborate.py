@@ -35,12 +35,12 @@ Two ways the totems can explain a pixel's hue: the view rebuilt from them shows 
 nearby (CHROMA, :func:`verify.patches.chroma_distance`), or two of them see it at one
 depth along the pixel's ray (CORROB, here). An authentic pixel needs one of them, so
 :func:`unseen` takes the smaller distance: a pixel is suspicious only where neither
-explains it. Measured on the standard set (640 x 480, box and envmap seeds 1-5, 50
-edits), patch AP of UNSEEN / CHROMA / CORROB: colour 0.917 / 0.905 / 0.901, splice
-0.828 / 0.836 / 0.720, insert 0.706 / 0.576 / 0.623, remove 0.360 / 0.372 / 0.280,
-inpaint 0.278 / 0.288 / 0.251; the untouched photos' scores (``verify.verdict``) at most
-0.028 against CHROMA's 0.070 (envmap seed 5, where the rebuilt view missed three
-objects).
+explains it. Measured on the standard set (`totems bench`, 640 x 480, box and envmap
+seeds 1-5, 58 edits), patch AP of UNSEEN / CHROMA / CORROB: colour 0.917 / 0.905 /
+0.901, splice 0.830 / 0.837 / 0.720, insert 0.707 / 0.579 / 0.623, remove 0.363 / 0.377
+/ 0.281, inpaint 0.287 / 0.295 / 0.251, shift 0.419 / 0.405 / 0.438; the untouched
+photos' scores (``verify.verdict``) at most 0.028 against CHROMA's 0.070 (envmap seed 5,
+where the rebuilt view missed three objects).
 
 Public
 ------

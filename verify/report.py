@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.errors import BadInput
 from verify import corroborate, patches, region, verdict as verdict_mod
@@ -150,7 +151,6 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     errors = patches.pixel_errors(image, recon)
     rays = getattr(fit, "rays", None)
     if rays is not None:
-        from inverse.grid import FrustumFrame
         errors["CORROB"] = corroborate.corroboration(
             rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in,
             FrustumFrame.from_dict(fit.grid), image)
