@@ -4,7 +4,8 @@ An untouched 320 x 240 box scene is consistent (exit 0); the same photo with a l
 colour patch pasted above the totems is inconsistent (exit 1) and the report names
 patches on it. A fit is tied to the totem pixels, masks, camera and key: the untouched
 photo's fit serves a copy edited outside the totems, and is refused (exit 2, one line)
-for a photo whose totem pixels changed.
+for a photo whose totem pixels changed. The fit keeps the totem rays, which judge the
+patch on their own (CORROB); a fit folder written before it kept them still verifies.
 """
 
 import json
@@ -88,3 +89,26 @@ def test_the_fit_serves_edits_outside_the_totems_only(verified, scene, tampered,
     line = assert_one_line_error(totems("verify", inside, "--fit", fit_dir,
                                         "--out", tmp_path / "b"))
     assert "another scene" in line
+
+
+def test_the_totem_rays_judge_the_square_and_a_fit_without_them_still_verifies(
+        verified, tampered, tmp_path):
+    fit_dir = verified[0] / "fit"
+    assert (fit_dir / "totem_rays.npz").is_file()
+    proc = totems("verify", tampered, "--fit", fit_dir, "--out", tmp_path / "a")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "a" / "verify" / "report.json").read_text())
+    unseen = report["scores"]["UNSEEN"]
+    assert unseen["score"] > unseen["threshold"]
+    assert report["metrics"]["patch_ap_CORROB"] > 0.8
+    assert (tmp_path / "a" / "verify" / "CORROB" / "heatmap.npy").is_file()
+    # A fit folder from before fits kept their rays: no CORROB, UNSEEN is CHROMA's.
+    old = tmp_path / "old-fit"
+    shutil.copytree(fit_dir, old)
+    (old / "totem_rays.npz").unlink()
+    proc = totems("verify", tampered, "--fit", old, "--out", tmp_path / "b")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "b" / "verify" / "report.json").read_text())
+    assert report["metrics"]["patch_ap_CORROB"] is None
+    assert not (tmp_path / "b" / "verify" / "CORROB").exists()
+    assert report["metrics"]["patch_ap_UNSEEN"] == report["metrics"]["patch_ap_CHROMA"]
