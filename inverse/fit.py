@@ -145,8 +145,8 @@ class TotemRays:
     ``cos_in`` (m,) the incidence cosine at its surface (rim rays near 0). Only rays
     that pass through the glass with transmittance above 5 % are kept. It holds no
     colour but the totem pixels'. With the camera's K the directions give away the
-    IoR (and the exit points the radius), so like the centres it belongs to the
-    defender: ``fit/`` is not for sharing, ``verify/`` is (it holds neither).
+    IoR (and the exit points the radius), so it belongs to the defender: ``fit/`` is
+    not for sharing, unlike ``verify/`` (which holds no ray).
     """
 
     o: np.ndarray
