@@ -3,8 +3,9 @@
 Given a depth map of the camera view (metres per grid column, over the frame's
 ``(s, t)`` range), each refracted totem ray meets the surface where it first passes
 behind it; that point's camera pixel receives the ray's radiance. Splatting every
-ray there and filling the gaps by pull-push rebuilds the camera view at the photo's
-resolution, with no colour grid in between.
+ray there and interpolating between the rays' pixels (linearly over their Delaunay
+triangulation; pull-push beyond it) rebuilds the camera view at the photo's resolution,
+with no colour grid in between.
 
 Which depth map is right is judged on the totem pixels alone, by leave-one-totem-out:
 the other totems' rays, splatted at the map, predict each held-out totem's pixels.
@@ -15,7 +16,7 @@ Measured (640x480, box and envmap seeds 1-5, true poses): this picked, in each o
 Public functions
 ----------------
 ``surface_hits(o, d, frame, depth, n_steps) -> (u, v, z, hit)``;
-``splat_image(u, v, values, size) -> (H, W, C)``;
+``splat_image(u, v, values, size, at=None) -> (H, W, C)`` (or the values at pixels);
 ``holdout_errors(o, d, radiance, totem, frame, depth, size) -> (errors, u, v, z, hit)``;
 ``holdout_error(...) -> (mean error, fraction landing)``;
 ``error_map(errors, u, v, size) -> (mean error map, ray density)``.
@@ -84,22 +85,59 @@ def _pixels(u, v, hit, size):
     return ui, vi, ok
 
 
-def splat_image(u, v, values, size, *, hit=None) -> np.ndarray:
-    """Average ``values`` (m, C) into the pixels ``(u, v)``, gaps filled by pull-push.
-
-    ``size`` = (W, H); ``hit`` (m,) bool selects the rays (default: finite ``u``).
-    Returns (H, W, C) float64.
-    """
+def _pixel_means(u, v, values, size, hit):
+    """The rays averaged per pixel: flat pixel index (k,), mean values (k, C), and the
+    ray count per pixel (H * W,)."""
     W, H = size
-    values = np.asarray(values, np.float64)
-    hit = np.isfinite(u) if hit is None else np.asarray(hit, bool)
     ui, vi, ok = _pixels(u, v, hit, size)
     flat = vi[ok] * W + ui[ok]
     weight = np.bincount(flat, minlength=W * H).astype(np.float64)
     total = np.stack([np.bincount(flat, values[ok, c], W * H)
                       for c in range(values.shape[1])], -1)
-    mean = total / np.maximum(weight, 1.0)[:, None]
-    return pull_push(mean.reshape(H, W, -1), weight.reshape(H, W))
+    idx = np.nonzero(weight > 0)[0]
+    return idx, total[idx] / weight[idx, None], weight
+
+
+def splat_image(u, v, values, size, *, hit=None, at=None) -> np.ndarray:
+    """Average ``values`` (m, C) into the pixels ``(u, v)`` and interpolate between them.
+
+    Between the pixels that rays reached, the values are interpolated linearly over
+    their Delaunay triangulation (``scipy.interpolate.LinearNDInterpolator``); outside
+    its hull, pull-push fills in. (Pull-push everywhere kept each sample pixel exact in
+    a blur of its coarser levels: a pattern of dots. Measured, the view splatted at the
+    true depth with the true centres, recon L1 over the protected region, box seeds
+    1-3 and envmap seeds 1-2 at 640x480: pull-push 0.073, linear 0.069; Clough-Tocher
+    cubic 0.078 and least squares with a squared-gradient prior 0.071-0.081 did worse.)
+
+    ``size`` = (W, H); ``hit`` (m,) bool selects the rays (default: finite ``u``).
+    ``at`` = (ui, vi) integer pixels: return only the values there, (k, C), instead of
+    the whole image. Returns (H, W, C) float64 (or (k, C)).
+    """
+    from scipy.interpolate import LinearNDInterpolator
+    from scipy.spatial import QhullError
+
+    W, H = size
+    values = np.asarray(values, np.float64)
+    hit = np.isfinite(u) if hit is None else np.asarray(hit, bool)
+    idx, mean, weight = _pixel_means(u, v, values, size, hit)
+    if at is None:
+        vq, uq = np.divmod(np.arange(W * H), W)
+    else:
+        uq, vq = (np.asarray(a, np.int64) for a in at)
+    out = np.full((uq.size, values.shape[1]), np.nan)
+    if idx.size >= 3:
+        pts = np.stack([idx % W, idx // W], 1).astype(np.float64)
+        try:
+            out = LinearNDInterpolator(pts, mean)(np.stack([uq, vq], 1).astype(np.float64))
+        except QhullError:                   # all samples on a line: pull-push alone
+            pass
+    gap = ~np.all(np.isfinite(out), axis=1)
+    if gap.any():
+        full = np.zeros((W * H, values.shape[1]))
+        full[idx] = mean
+        filled = pull_push(full.reshape(H, W, -1), weight.reshape(H, W))
+        out[gap] = filled[vq[gap], uq[gap]]
+    return out if at is not None else out.reshape(H, W, -1)
 
 
 def holdout_errors(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
@@ -129,9 +167,9 @@ def holdout_errors(o, d, radiance, totem, frame: FrustumFrame, depth, size, *,
         held = totem == j
         test = held & ok
         if test.any():
-            img = splat_image(u, v, radiance, size, hit=hit & ~held)
-            errors[test] = np.abs(show(img[vi[test], ui[test]])
-                                  - show(radiance[test])).mean(1)
+            pred = splat_image(u, v, radiance, size, hit=hit & ~held,
+                               at=(ui[test], vi[test]))
+            errors[test] = np.abs(show(pred) - show(radiance[test])).mean(1)
     return errors, u, v, z, hit
 
 
