@@ -108,7 +108,10 @@ class FitSettings:
     lr_ambient: float = 0.002
     stereo: bool = True              # keep stereo's geometry where held-out totems say so
     stereo_res: tuple = (120, 160)   # (rows, columns) of the stereo depth maps
-    stereo_slices: int = 64
+    stereo_slices: int = 128
+    stereo_sigma: float = 0.7        # cells: each totem ray's splat in the sweep
+    stereo_p1: float = 1.0           # semi-global matching penalties (median costs)
+    stereo_p2: float = 8.0
     stereo_far_biases: tuple = (0.0, 1.0)
 
     def to_dict(self) -> dict:
@@ -568,7 +571,9 @@ def _stereo_view(rays: TotemRays, frame, density, grid_view, grid_points, size, 
     return choose_view(rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame,
                        column_depth(density, frame), grid_view, grid_points, size,
                        res=settings.stereo_res, n_slices=settings.stereo_slices,
-                       far_biases=settings.stereo_far_biases)
+                       far_biases=settings.stereo_far_biases,
+                       sweep={"sigma": settings.stereo_sigma, "p1": settings.stereo_p1,
+                              "p2": settings.stereo_p2})
 
 
 def _outline_term(masks, K, radius):

@@ -119,7 +119,7 @@ def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
 def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
                 grid_view, grid_points, size, *, res=(120, 160), n_slices: int = 64,
                 cos_min: float = 0.5, far_biases=(0.0, 1.0), sigma: float = 16.0,
-                min_rays: float = 0.05) -> StereoView:
+                min_rays: float = 0.05, sweep: dict | None = None) -> StereoView:
     """Compare the grid's geometry with stereo maps, globally and pixel by pixel.
 
     Parameters
@@ -141,6 +141,8 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
         lands; a pixel takes the stereo view where that local error is lower.
     min_rays : below this many held-out rays per pixel (after the Gaussian) for
         either geometry, a pixel follows the whole-view choice.
+    sweep : further keywords of :func:`inverse.sweep.plane_sweep` (``sigma``, ``p1``,
+        ``p2``; its defaults if None).
     """
     o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
     radiance = np.asarray(radiance, np.float64)
@@ -153,7 +155,8 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
         for bias in far_biases:
             name = "stereo" if bias == 0 else f"stereo_far{bias:g}"
             maps[name] = plane_sweep(o[good], d[good], colour, totem[good], frame,
-                                     res, n_slices=n_slices, far_bias=bias).depth
+                                     res, n_slices=n_slices, far_bias=bias,
+                                     **(sweep or {})).depth
     errors = {k: holdout_errors(o, d, radiance, totem, frame, D, size,
                                 to_display=_display) for k, D in maps.items()}
     holdout = {k: float(np.nanmean(e[0])) if np.isfinite(e[0]).any() else float("inf")
