@@ -116,6 +116,7 @@ class FitSettings:
     stereo_sigma: float = 0.7        # cells: each totem ray's splat in the sweep
     stereo_p1: float = 1.0           # semi-global matching penalties (median costs)
     stereo_p2: float = 8.0
+    stereo_margin: float = 0.8       # stereo must beat the grid's hold-out by 20 %
     stereo_far_biases: tuple = (0.0, 1.0)
 
     def to_dict(self) -> dict:
@@ -577,7 +578,7 @@ def _stereo_view(rays: TotemRays, frame, density, grid_view, grid_points, size, 
                        res=settings.stereo_res, n_slices=settings.stereo_slices,
                        far_biases=settings.stereo_far_biases,
                        sweep={"sigma": settings.stereo_sigma, "p1": settings.stereo_p1,
-                              "p2": settings.stereo_p2})
+                              "p2": settings.stereo_p2}, margin=settings.stereo_margin)
 
 
 def _outline_term(masks, K, radius):

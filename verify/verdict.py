@@ -36,7 +36,7 @@ import numpy as np
 
 from scenes.errors import BadInput
 
-L1_THRESHOLD = 0.375
+L1_THRESHOLD = 0.448
 """Score (sRGB L1 excess of the worst patches over the median patch) above which a photo
 is reported inconsistent: a guard against gross brightness edits (a grey, black or white
 patch has no hue for UNSEEN to see), set by the same rule as ``UNSEEN_THRESHOLD``.
@@ -50,7 +50,7 @@ misses, a shift on envmap seed 3 (0.498); the other edits score at most 0.352 (a
 patch on box seed 1).
 """
 
-UNSEEN_THRESHOLD = 0.044
+UNSEEN_THRESHOLD = 0.041
 """UNSEEN score (excess of the worst patches' :func:`verify.corroborate.unseen` distance
 over the median patch, sRGB) above which a photo is reported inconsistent.
 
