@@ -31,7 +31,7 @@ from scipy import ndimage
 from inverse.camera import pixel_rays, project
 from inverse.grid import FrustumFrame
 from inverse.splat import error_map, holdout_errors, splat_image
-from inverse.sweep import plane_sweep
+from inverse.sweep import plane_sweep, slice_colours
 from scenes.render import linear_to_srgb
 
 
@@ -163,11 +163,15 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     good = np.asarray(cos_in) >= cos_min
     if len(np.unique(totem[good])) >= 2:
         colour = _display(radiance[good])
+        sweep = dict(sweep or {})
+        shared = slice_colours(o[good], d[good], colour, totem[good], frame, res,
+                               n_slices=n_slices, sigma=sweep.get("sigma", 1.5),
+                               min_weight=sweep.get("min_weight", 0.3))
         for bias in far_biases:
             name = "stereo" if bias == 0 else f"stereo_far{bias:g}"
             maps[name] = plane_sweep(o[good], d[good], colour, totem[good], frame,
                                      res, n_slices=n_slices, far_bias=bias,
-                                     **(sweep or {})).depth
+                                     colours=shared, **sweep).depth
     errors = {k: holdout_errors(o, d, radiance, totem, frame, D, size,
                                 to_display=_display) for k, D in maps.items()}
     holdout = {k: float(np.nanmean(e[0])) if np.isfinite(e[0]).any() else float("inf")

@@ -218,7 +218,8 @@ def slice_colours(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: in
 
 def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
                 sigma: float | None = 1.5, min_weight: float = 0.3, p1: float = 0.3,
-                p2: float = 3.0, far_bias: float = 0.0) -> SweepResult:
+                p2: float = 3.0, far_bias: float = 0.0,
+                colours: SliceColours | None = None) -> SweepResult:
     """Depth and colour of each grid column from the totems' parallax.
 
     Parameters
@@ -241,14 +242,18 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
         median cost.
     far_bias : added to the normalised cost of the nearest slice, falling linearly to
         0 at the farthest: where the colours agree at every depth, prefer far.
+    colours : :func:`slice_colours` of these rays already computed with the same
+        ``res``, ``n_slices``, ``sigma`` and ``min_weight`` (sweeps that differ only in
+        ``far_bias`` or the penalties share it); computed here if None.
 
     The cost of a cell at a slice is the variance of the landing totems' mean colours
     where at least two land; where fewer land it says nothing, so it is the median
     cost (a fixed penalty there would favour depths where the totems' footprints
     overlap, not where they agree).
     """
-    sc = slice_colours(o, d, colour, totem, frame, res, n_slices=n_slices, sigma=sigma,
-                       min_weight=min_weight)
+    sc = colours if colours is not None else slice_colours(
+        o, d, colour, totem, frame, res, n_slices=n_slices, sigma=sigma,
+        min_weight=min_weight)
     wsum, land, mu, z, peak = sc.weight, sc.land, sc.colour, sc.z, sc.peak
     n_land = land.sum(0)                                         # (nk, nt, ns)
     lw = land.astype(np.float64)

@@ -137,3 +137,43 @@ def test_stereo_weight_follows_the_local_held_out_errors():
         assert w[: H // 3, 2 * W // 3:].min() > 0.9
         # Where no held-out ray landed, the whole view's choice.
         assert np.allclose(w[-H // 6:], float(prefer), atol=0.05)
+
+
+def test_stereo_must_beat_the_grid_by_the_margin():
+    rng = np.random.default_rng(8)
+    n = 4000
+    u = rng.uniform(0, W, n)
+    v = rng.uniform(0, H, n)
+    grid = (np.full(n, 0.10), u, v)
+    stereo = (np.full(n, 0.09), u, v)                # 10 % better everywhere
+    taken = stereo_weight(grid, stereo, (W, H), prefer_stereo=False, margin=1.0)
+    kept = stereo_weight(grid, stereo, (W, H), prefer_stereo=False, margin=0.8)
+    inner = (slice(H // 4, 3 * H // 4), slice(W // 4, 3 * W // 4))
+    assert taken[inner].min() > 0.9 and kept[inner].max() < 0.1
+    # The whole view's choice follows the same rule: a stereo map at the true depth
+    # against a grid at the true depth too; stereo's hold-out is not 20 % lower.
+    z_plane = 3.0
+    o, d, js, col = rays_onto_plane(z_plane)
+    flat = np.full((H, W, 3), 0.5, np.float32)
+    view = choose_view(o, d, col ** 2.2, js, np.ones(len(o)), FRAME,
+                       np.full((30, 40), z_plane), flat, np.zeros((0, 3)), (W, H),
+                       res=(45, 60), far_biases=(0.0,), margin=0.8)
+    assert view.chosen == "grid"
+    assert view.holdout["stereo"] > 0.8 * view.holdout["grid"]
+
+
+def test_splat_interpolates_linearly_between_rays_and_reads_pixels_alike():
+    # Rays on a coarse lattice carrying a linear ramp: between them the splat is the
+    # ramp itself (pull-push alone would blur it towards its coarse levels' mean).
+    vv, uu = np.mgrid[10:H - 10:12, 10:W - 10:12]
+    u, v = uu.ravel().astype(float), vv.ravel().astype(float)
+    values = np.stack([u / W, v / H], 1)
+    img = splat_image(u, v, values, (W, H))
+    rows, cols = slice(20, H - 30), slice(20, W - 30)
+    yy, xx = np.mgrid[rows, cols]
+    assert np.abs(img[rows, cols, 0] - xx / W).max() < 1e-6
+    assert np.abs(img[rows, cols, 1] - yy / H).max() < 1e-6
+    # Outside the rays' hull it is still filled; reading pixels gives the same values.
+    assert np.all(np.isfinite(img))
+    pick = (np.array([0, 5, W - 1, 100]), np.array([0, H - 1, 3, 50]))
+    assert np.allclose(splat_image(u, v, values, (W, H), at=pick), img[pick[1], pick[0]])
