@@ -116,7 +116,7 @@ class FitSettings:
     stereo_sigma: float = 0.7        # cells: each totem ray's splat in the sweep
     stereo_p1: float = 1.0           # semi-global matching penalties (median costs)
     stereo_p2: float = 8.0
-    stereo_margin: float = 0.8       # stereo must beat the grid's hold-out by 20 %
+    stereo_margin: float = 0.9       # stereo must beat the grid's hold-out by 10 %
     stereo_far_biases: tuple = (0.0, 1.0)
 
     def to_dict(self) -> dict:
