@@ -15,7 +15,12 @@ The glass also reflects: a totem pixel is modelled as ``T_F C + R_F a``, ``R_F =
 sqrt(T_F)`` the Fresnel reflectance of its front surface and ``a`` one ambient linear
 colour (fitted; starts at the mean observed radiance). Without it, dark regions seen
 through the totems take the tint of the reflected room (measured: box seed 1 at
-320x240, recon L1 0.078 -> 0.068; envmap seed 1, 0.104 -> 0.090).
+320x240, recon L1 0.078 -> 0.068; envmap seed 1, 0.104 -> 0.090). Two things that did
+not help (640x480): a lat-long map of the reflected environment (16 x 32, fitted in log
+radiance) in place of the one colour took light from the scene (5x the true reflection,
+rendered by Mitsuba with the glass's transmission off; recon L1 box 0.10 -> 0.16,
+envmap 0.08 -> 0.16); and subtracting that true reflection from the totem pixels
+before the fit left the view no better (envmap seeds 1, 2: 0.065 -> 0.071, 0.067 -> 0.074).
 
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the
