@@ -166,9 +166,11 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     if len(np.unique(totem[good])) >= 2:
         colour = _display(radiance[good])
         sweep = dict(sweep or {})
+        # One slice_colours for every far bias (only the cost differs between them),
+        # with the sweep's own defaults for what the caller leaves out.
         shared = slice_colours(o[good], d[good], colour, totem[good], frame, res,
-                               n_slices=n_slices, sigma=sweep.get("sigma", 1.5),
-                               min_weight=sweep.get("min_weight", 0.3))
+                               n_slices=n_slices,
+                               **{k: sweep[k] for k in ("sigma", "min_weight") if k in sweep})
         for bias in far_biases:
             name = "stereo" if bias == 0 else f"stereo_far{bias:g}"
             maps[name] = plane_sweep(o[good], d[good], colour, totem[good], frame,
