@@ -105,6 +105,21 @@ def test_chroma_distance_finds_a_colour_that_is_not_there():
     assert x0 <= 150 and x1 >= 190 and y0 <= 60 and y1 >= 100
 
 
+def test_range_distance_sees_brightness_but_forgives_small_shifts():
+    photo = 0.8 * _blocks()
+    # the recon 3 px off: every blurred photo value lies in the recon's 16-px range
+    shifted = np.roll(photo, (3, -3), axis=(0, 1))
+    assert patches.range_distance(photo, shifted)[20:-20, 20:-20].max() < 1e-9
+    # a grey square (no hue, so CHROMA cannot see it) darker than anything nearby
+    flat = np.full((H, W, 3), 0.6)
+    dark = flat.copy()
+    dark[60:100, 150:190] = 0.1
+    assert patches.chroma_distance(dark, flat).max() < 1e-9
+    d = patches.range_distance(dark, flat)
+    assert d[80, 170] == pytest.approx(0.5, rel=1e-6)          # 0.6 - 0.1 in each channel
+    assert d[:40].max() < 1e-9 and d[:, :120].max() < 1e-9     # away from the square
+
+
 def test_patch_labels_use_more_than_ten_percent():
     g = _grid()
     a, b = 10, 10

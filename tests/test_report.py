@@ -55,6 +55,7 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
     assert set(data) == FIELDS
     assert data["verdict"] == "inconsistent"
     assert set(data["metrics"]) == {"patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
+                                    "patch_ap_RANGE",
                                     "patch_ap_CORROB", "patch_ap_UNSEEN", "recon_L1",
                                     "pose_L1"}
     # pose_L1 = mean over totems of sum |dP|: (0.01 + 0.03) / 2
@@ -67,7 +68,7 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
     # totem 1 moved farther (0.03 m) than totem 0 (0.01 m): its silhouette overlaps less
     assert data["totems"][1]["mask_iou"] < data["totems"][0]["mask_iou"] < 1
     assert data["key_fingerprint"] == folder.key_fingerprint(scene.radius, scene.ior)
-    for name in ("L1", "SSIM", "CHROMA", "UNSEEN"):
+    for name in ("L1", "SSIM", "CHROMA", "RANGE", "UNSEEN"):
         h = np.load(tmp_path / "verify" / name / "heatmap.npy")
         assert h.shape == (30, 30) and np.isfinite(h).all()
         for pic in ("heatmap_vis.png", "heatmap_overlay.png"):
@@ -97,7 +98,8 @@ def test_metrics_are_null_without_ground_truth():
     photo = texture()
     rep = report.verify_scene(make_scene(photo), make_fit(photo))
     assert rep.to_json()["metrics"] == {"patch_ap_L1": None, "patch_ap_SSIM": None,
-                                       "patch_ap_CHROMA": None, "patch_ap_CORROB": None,
+                                       "patch_ap_CHROMA": None, "patch_ap_RANGE": None,
+                                       "patch_ap_CORROB": None,
                                        "patch_ap_UNSEEN": None, "recon_L1": None,
                                        "pose_L1": None}
     assert rep.to_json()["totems"][0]["mask_iou"] > 0.98     # true centres, true masks

@@ -78,8 +78,8 @@ def test_coloured_square_is_inconsistent_and_named():
 def test_threshold_override_and_no_patches():
     photo = texture()
     rep = verify_scene(make_scene(with_square(photo)), make_fit(photo),
-                       thresholds={"L1": 1e6, "UNSEEN": 1e6})
-    assert rep.verdict == "consistent" and rep.decision.thresholds["L1"] == 1e6
+                       thresholds={"RANGE": 1e6, "UNSEEN": 1e6})
+    assert rep.verdict == "consistent" and rep.decision.thresholds["RANGE"] == 1e6
     g = patches.patch_grid(make_scene().masks.any(axis=0))
     with pytest.raises(BadInput, match="cannot be verified"):
-        verdict.decide({"L1": np.ones((30, 30))}, np.zeros((30, 30)), g)
+        verdict.decide({"RANGE": np.ones((30, 30))}, np.zeros((30, 30)), g)

@@ -279,13 +279,13 @@ def markdown(bench: dict) -> str:
                          f"| {_fmt(m['pose_L1'])} | {_fmt(paper[1])} | {m['n']} |")
     lines += ["", "## Table 2: patch AP per manipulation (joint fit)\n",
               "| kind | AP (L1) | paper L1 | AP (SSIM) | paper LPIPS | AP (CHROMA) "
-              "| AP (CORROB) | AP (UNSEEN) | flagged | n |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "| AP (RANGE) | AP (CORROB) | AP (UNSEEN) | flagged | n |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for kind, m in sorted(s["table2"].items()):
         paper = PAPER_TABLE2.get(kind, (None, None))
         lines.append(f"| {kind} | {_fmt(m['ap_L1'])} | {_fmt(paper[0])} | "
                      f"{_fmt(m['ap_SSIM'])} | {_fmt(paper[1])} | {_fmt(m['ap_CHROMA'])} "
-                     f"| {_fmt(m.get('ap_CORROB'))} | {_fmt(m.get('ap_UNSEEN'))} "
+                     f"| {_fmt(m.get('ap_RANGE'))} | {_fmt(m.get('ap_CORROB'))} | {_fmt(m.get('ap_UNSEEN'))} "
                      f"| {m.get('flagged', '–')} | {m['n']} |")
     a = s["accuracy"]
     lines += ["", "## Image level\n",
@@ -308,8 +308,8 @@ def markdown(bench: dict) -> str:
 
 
 CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
-              "threshold", "score_L1", "score_UNSEEN", "recon_L1", "pose_L1", "patch_ap_L1",
-              "patch_ap_SSIM", "patch_ap_CHROMA", "patch_ap_CORROB", "patch_ap_UNSEEN",
+              "threshold", "score_RANGE", "score_UNSEEN", "recon_L1", "pose_L1", "patch_ap_L1",
+              "patch_ap_SSIM", "patch_ap_CHROMA", "patch_ap_RANGE", "patch_ap_CORROB", "patch_ap_UNSEEN",
               "wall_s", "fit_from", "error"]
 
 

@@ -24,6 +24,10 @@ heatmaps compare one to one:
   :func:`verify.corroborate.corroboration`: how far the photo's hue is from what two
   totems saw at the best depth along the pixel's ray, sRGB [0, 1]; it needs no
   reconstruction, only the totem rays.
+- ``RANGE/heatmap.npy`` (ours, the verdict's brightness guard) is the patch mean of
+  :func:`range_distance`: CHROMA's test on the colour itself (brightness included),
+  how far the photo's RGB lies outside the range the reconstruction shows within
+  ``CHROMA_RADIUS_PX``; it forgives the view's edges a few pixels off, as L1 does not.
 - ``UNSEEN/heatmap.npy`` (ours, the verdict's) is the patch mean of
   :func:`verify.corroborate.unseen`, per pixel the smaller of CHROMA and CORROB: a hue
   that neither the rebuilt view nor the totem rays explain.
@@ -75,7 +79,7 @@ CHROMA_BLUR_PX = 3.0
 detail finer than its totem rays' spacing (about 3 px at 640x480), so neither should the
 photo it is compared with."""
 
-METRICS = ("L1", "SSIM", "CHROMA", "CORROB", "UNSEEN")
+METRICS = ("L1", "SSIM", "CHROMA", "RANGE", "CORROB", "UNSEEN")
 """Every heatmap verify writes; CORROB (:mod:`verify.corroborate`) needs the fit's
 totem rays and is absent for a fit written without them (UNSEEN is then CHROMA's)."""
 
@@ -179,7 +183,8 @@ def pixel_errors(image: np.ndarray, recon: np.ndarray) -> dict[str, np.ndarray]:
     -------
     {"L1": (H, W) mean over channels of |image - recon| (sRGB, [0, 1]),
      "SSIM": (H, W) 1 - SSIM map averaged over channels, [0, 2],
-     "CHROMA": (H, W) :func:`chroma_distance`, sRGB [0, 1]}.
+     "CHROMA": (H, W) :func:`chroma_distance`, sRGB [0, 1],
+     "RANGE": (H, W) :func:`range_distance`, sRGB [0, 1]}.
     """
     from skimage.metrics import structural_similarity
 
@@ -194,7 +199,8 @@ def pixel_errors(image: np.ndarray, recon: np.ndarray) -> dict[str, np.ndarray]:
     _, S = structural_similarity(image, recon, channel_axis=2, data_range=1.0, full=True,
                                  gaussian_weights=True, sigma=1.5,
                                  use_sample_covariance=False)
-    return {"L1": l1, "SSIM": 1.0 - S.mean(axis=2), "CHROMA": chroma_distance(image, recon)}
+    return {"L1": l1, "SSIM": 1.0 - S.mean(axis=2), "CHROMA": chroma_distance(image, recon),
+            "RANGE": range_distance(image, recon)}
 
 
 def chroma(rgb: np.ndarray) -> np.ndarray:
@@ -224,14 +230,42 @@ def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
     -------
     (H, W) float64, sRGB units, >= 0.
     """
+    return outside_range(chroma(image), chroma(recon), radius=radius, sigma=sigma)
+
+
+def range_distance(image: np.ndarray, recon: np.ndarray, *,
+                   radius: int = CHROMA_RADIUS_PX,
+                   sigma: float = CHROMA_BLUR_PX) -> np.ndarray:
+    """How far each photo pixel's colour lies outside the reconstruction's nearby range.
+
+    :func:`chroma_distance` on the sRGB values themselves: brightness counts too, so a
+    grey, black or white patch (no hue) is seen, while the view's edges a few pixels
+    off and its blur are forgiven within ``radius`` px (L1 counts them everywhere).
+
+    Parameters
+    ----------
+    image, recon : (H, W, 3) sRGB in [0, 1].
+
+    Returns
+    -------
+    (H, W) float64, sRGB units, >= 0.
+    """
+    return outside_range(image, recon, radius=radius, sigma=sigma)
+
+
+def outside_range(photo: np.ndarray, recon: np.ndarray, *, radius: int,
+                  sigma: float) -> np.ndarray:
+    """Per pixel, how far ``photo`` (blurred by a Gaussian of ``sigma`` px) falls
+    outside ``[lowest, highest]`` of ``recon`` over the ``(2 radius + 1)``-pixel square
+    around it, per channel, averaged over the channels. Both (H, W, C), same units."""
     from scipy import ndimage
 
-    c_img = ndimage.gaussian_filter(chroma(image), (sigma, sigma, 0))
-    c_rec = chroma(recon)
+    photo = ndimage.gaussian_filter(np.asarray(photo, np.float64), (sigma, sigma, 0))
+    recon = np.asarray(recon, np.float64)
     k = (2 * int(radius) + 1, 2 * int(radius) + 1, 1)
-    low = ndimage.minimum_filter(c_rec, size=k, mode="nearest")
-    high = ndimage.maximum_filter(c_rec, size=k, mode="nearest")
-    return np.maximum(np.maximum(low - c_img, c_img - high), 0.0).mean(axis=2)
+    low = ndimage.minimum_filter(recon, size=k, mode="nearest")
+    high = ndimage.maximum_filter(recon, size=k, mode="nearest")
+    return np.maximum(np.maximum(low - photo, photo - high), 0.0).mean(axis=2)
 
 
 def heatmaps(errors: dict[str, np.ndarray], grid: PatchGrid,
