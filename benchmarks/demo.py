@@ -27,7 +27,7 @@ def run(*args) -> int:
 
 
 def _verdict(scene: Path) -> str:
-    """'consistent\nL1 0.137 of 0.448, UNSEEN 0.003 of 0.041' from the scene's report.json,
+    """'consistent\nRANGE 0.060 of 0.140, UNSEEN 0.003 of 0.041' from the scene's report.json,
     or ''."""
     path = scene / "totems-out/verify/report.json"
     if not path.is_file():
