@@ -227,9 +227,9 @@ def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
     radius instead (offsets on a 2-px lattice) was measured on the standard set's fits
     (2026-12-01): UNSEEN patch AP colour 0.918 -> 0.920, insert 0.708 -> 0.730, shift
     0.479 -> 0.527, splice 0.833 -> 0.822; one more edit flagged (25 of 58), the
-    held-out threshold 0.041 -> 0.043; 3 s more per photo. Not adopted: the photo is
-    blurred and a sharp reconstruction has no blend of its neighbours' colours, so an
-    untouched edge a few pixels off is flagged.
+    held-out threshold 0.041 -> 0.043; 3 s more per photo. Not adopted: the gains are
+    small, and where the reconstruction is sharp it holds no blend of two neighbours'
+    colours for the blurred photo's edge between them to match (the box does).
 
     Parameters
     ----------
