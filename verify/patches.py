@@ -250,14 +250,7 @@ def range_distance(image: np.ndarray, recon: np.ndarray, *,
     :func:`chroma_distance` on the sRGB values themselves: brightness counts too, so a
     grey, black or white patch (no hue) is seen, while the view's edges a few pixels
     off and its blur are forgiven within ``radius`` px (L1 counts them everywhere).
-
-    Parameters
-    ----------
-    image, recon : (H, W, 3) sRGB in [0, 1].
-
-    Returns
-    -------
-    (H, W) float64, sRGB units, >= 0.
+    Parameters and result as :func:`chroma_distance`: sRGB in [0, 1], (H, W) >= 0.
     """
     return outside_range(image, recon, radius=radius, sigma=sigma)
 
