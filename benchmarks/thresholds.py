@@ -1,10 +1,12 @@
 """Calibrate the verdict's thresholds on untouched photos kept apart from the benchmark.
 
     python benchmarks/make_set.py CAL --first-seed 11 --seeds 8 --kinds ""
-    python benchmarks/thresholds.py CAL OUT [--jobs 2] [--factor 1.25]
+    python benchmarks/thresholds.py CAL OUT [--jobs 2] [--factor 1.25] [--reverify]
 
 Runs ``totems check`` on every scene folder of CAL (skipping those whose report is
-already in OUT, so an interrupted run resumes), then prints each judging metric's score
+already in OUT, so an interrupted run resumes; with ``--reverify``, ``totems verify``
+on the fits already in OUT instead, which is what a change to ``verify/`` alone
+needs: seconds a scene instead of a fit), then prints each judging metric's score
 per scene (``report.json`` ``scores``) and the threshold the rule gives: ``factor`` times
 the largest score, so that no untouched photo of the held-out set is called
 inconsistent and a photo must look a quarter worse than the worst of them to be.
@@ -21,11 +23,14 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 
-def check(scene: Path, out: Path) -> Path:
-    """``totems check`` of one scene into ``out/<name>``; returns its report.json."""
+def check(scene: Path, out: Path, reverify: bool = False) -> Path:
+    """``totems check`` of one scene into ``out/<name>``, or with ``reverify``
+    ``totems verify`` (which reuses ``out/<name>/fit`` and fits only where there is
+    none); returns its report.json."""
     report = out / scene.name / "verify" / "report.json"
-    if not report.is_file():
-        proc = subprocess.run([sys.executable, "-m", "verify.cli", "check", str(scene),
+    if reverify or not report.is_file():
+        command = "verify" if reverify else "check"
+        proc = subprocess.run([sys.executable, "-m", "verify.cli", command, str(scene),
                                "--out", str(out / scene.name), "--quiet"],
                               capture_output=True, text=True)
         if proc.returncode == 2 or not report.is_file():
@@ -48,13 +53,15 @@ def main(argv=None) -> int:
     p.add_argument("out", type=Path, help="where the checks are written")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--factor", type=float, default=1.25)
+    p.add_argument("--reverify", action="store_true",
+                   help="verify again with the fits in OUT (after a change to verify/)")
     args = p.parse_args(argv)
     scenes = sorted(d for d in args.scenes.iterdir() if (d / "image.png").is_file())
     if not scenes:
         print(f"error: no scene folders in {args.scenes}", file=sys.stderr)
         return 2
     with ThreadPoolExecutor(args.jobs) as pool:
-        reports = list(pool.map(lambda s: check(s, args.out), scenes))
+        reports = list(pool.map(lambda s: check(s, args.out, args.reverify), scenes))
     scores = {}
     for scene, rep in zip(scenes, reports):
         r = json.loads(rep.read_text())

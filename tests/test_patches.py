@@ -44,6 +44,36 @@ def test_patch_means_agree_with_a_loop():
             assert got[a, b] == pytest.approx(v[w].mean(), rel=1e-9)
 
 
+def test_patch_top_means_agree_with_a_loop():
+    g = _grid()
+    rng = np.random.default_rng(1)
+    vals = rng.random((H, W))
+    vals[rng.random((H, W)) < 0.05] = np.nan            # not known there
+    wts = rng.random((H, W)) > 0.3
+    got = patches.patch_top_means(vals, g, wts, fraction=0.1)
+    for a in (0, 11, 29):
+        for b in (0, 17, 29):
+            y0, x0 = g.rows[a], g.cols[b]
+            v = vals[y0:y0 + 64, x0:x0 + 64][wts[y0:y0 + 64, x0:x0 + 64]]
+            v = np.sort(v[np.isfinite(v)])[::-1]
+            assert got[a, b] == pytest.approx(v[:int(np.ceil(0.1 * len(v)))].mean(),
+                                              rel=1e-6)
+    none = np.zeros((H, W), bool)
+    assert np.isnan(patches.patch_top_means(vals, g, none)).all()
+
+
+def test_an_edit_a_tenth_of_a_patch_scores_in_full_for_the_hue_metrics():
+    g = _grid()
+    d = np.zeros((H, W))
+    a, b = 10, 10
+    y0, x0 = g.rows[a], g.cols[b]
+    d[y0 + 20:y0 + 40, x0 + 20:x0 + 40] = 0.3           # 400 px: a tenth of 64 x 64
+    scores = patches.patch_scores({"UNSEEN": d, "RANGE": d}, g)
+    assert scores["UNSEEN"][a, b] == pytest.approx(0.3 * 400 / 410, rel=1e-6)
+    assert scores["RANGE"][a, b] == pytest.approx(0.3 * 400 / 64 ** 2, rel=1e-6)
+    assert scores["UNSEEN"][0, 0] == 0.0
+
+
 def test_heatmap_peaks_at_the_square():
     photo = texture()
     small = (150, 60, 190, 100)             # inside one patch, with room around it
@@ -97,12 +127,17 @@ def test_chroma_distance_finds_a_colour_that_is_not_there():
     # its chroma (-0.3, 0, 0.3) against the recon's (0.1, 0, -0.1): 0.8 / 3 at the centre
     assert d[80, 170] == pytest.approx(0.8 / 3, rel=1e-6)
     assert d[:40].max() < 1e-9 and d[:, :120].max() < 1e-9       # away from the square
-    # and the patch map peaks over the square
+    # and the patch map peaks over the square: the patches that hold it all score the
+    # most (their worst tenth is all square), those clear of it (and of the photo's
+    # 3-px blur) nothing
     g = _grid()
     heat = patches.heatmaps({"CHROMA": d}, g)["CHROMA"]
-    a, b = np.unravel_index(np.argmax(heat), heat.shape)
-    x0, y0, x1, y1 = g.box(a, b)
-    assert x0 <= 150 and x1 >= 190 and y0 <= 60 and y1 >= 100
+    boxes = np.array([[g.box(a, b) for b in range(g.n)] for a in range(g.n)])
+    x0, y0, x1, y1 = np.moveaxis(boxes, -1, 0)
+    holds = (x0 <= 150) & (x1 >= 190) & (y0 <= 60) & (y1 >= 100)
+    apart = (x0 >= 202) | (x1 <= 138) | (y0 >= 112) | (y1 <= 48)
+    assert holds.any() and heat[holds].min() == pytest.approx(heat.max())
+    assert heat[apart].max() < 1e-9
 
 
 def test_range_distance_sees_brightness_but_forgives_small_shifts():

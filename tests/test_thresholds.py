@@ -38,3 +38,29 @@ def test_finished_checks_are_read_not_rerun(tmp_path, capsys):
 def test_no_scene_folders_is_exit_2(tmp_path, capsys):
     assert thresholds.main([str(tmp_path), str(tmp_path / "out")]) == 2
     assert "no scene folders" in capsys.readouterr().err
+
+
+def test_reverify_verifies_every_scene_again_with_its_fit(tmp_path, monkeypatch, capsys):
+    cal, out = tmp_path / "cal", tmp_path / "out"
+    calls = []
+
+    def fake_run(cmd, **kw):                 # stands for `python -m verify.cli verify`
+        calls.append(cmd[3:5])
+        name = Path(cmd[4]).name
+        rep = out / name / "verify" / "report.json"
+        rep.write_text(json.dumps({"verdict": "consistent", "scores": {
+            "UNSEEN": {"score": 0.05, "threshold": 0.06}}}))
+        return type("Done", (), {"returncode": 0, "stdout": "", "stderr": ""})()
+
+    for name in ("box-11", "box-12"):
+        (cal / name).mkdir(parents=True)
+        (cal / name / "image.png").write_bytes(b"")
+        rep = out / name / "verify" / "report.json"
+        rep.parent.mkdir(parents=True)
+        rep.write_text(json.dumps({"verdict": "consistent", "scores": {
+            "UNSEEN": {"score": 0.01, "threshold": 0.041}}}))
+    monkeypatch.setattr(thresholds.subprocess, "run", fake_run)
+    assert thresholds.main([str(cal), str(out), "--jobs", "1", "--reverify"]) == 0
+    assert sorted(c[1] for c in calls) == [str(cal / "box-11"), str(cal / "box-12")]
+    assert all(c[0] == "verify" for c in calls)
+    assert "UNSEEN: largest 0.0500 (box-11) -> threshold 0.0625" in capsys.readouterr().out

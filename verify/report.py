@@ -161,8 +161,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     cover = patches.patch_fraction(seen, grid)
     keep = cover > 0
 
-    # verdict on patch means restricted to protected, non-totem pixels (sRGB [0, 1])
-    inside = {name: patches.patch_means(e, grid, seen) for name, e in errors.items()}
+    # verdict on patch scores over protected, non-totem pixels (sRGB [0, 1])
+    inside = patches.patch_scores(errors, grid, seen)
     decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
