@@ -79,7 +79,13 @@ MIN_TOTEMS = 2
 its whole ray; two are stereo."""
 
 
-def _cell_centres(frame: FrustumFrame, res):
+def map_res(frame: FrustumFrame, cell_px: float = CELL_PX) -> tuple[int, int]:
+    """(nt, ns) cells of about ``cell_px`` pixels over the frame's range."""
+    return (max(2, round((frame.v_range[1] - frame.v_range[0]) / cell_px)),
+            max(2, round((frame.u_range[1] - frame.u_range[0]) / cell_px)))
+
+
+def cell_centres(frame: FrustumFrame, res):
     """Pixel coordinates (u, v) of the map's cell centres, each (nt, ns)."""
     nt, ns = res
     du = frame.u_range[1] - frame.u_range[0]
@@ -143,13 +149,12 @@ def corroboration(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, *,
     totem = np.asarray(totem)
     if len(np.unique(totem[good])) < min_totems:
         return np.full((H, W), np.nan)
-    res = (max(2, round((frame.v_range[1] - frame.v_range[0]) / cell_px)),
-           max(2, round((frame.u_range[1] - frame.u_range[0]) / cell_px)))
+    res = map_res(frame, cell_px)
     colour = linear_to_srgb(np.clip(np.asarray(radiance, np.float64)[good], 0.0, 1.0))
     sc = slice_colours(np.asarray(o)[good], np.asarray(d)[good], colour, totem[good],
                        frame, res, n_slices=n_slices, sigma=sigma)
     blurred = ndimage.gaussian_filter(chroma(image), (sigma * cell_px, sigma * cell_px, 0))
-    uu, vv = _cell_centres(frame, res)
+    uu, vv = cell_centres(frame, res)
     E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
     return to_pixels(E, frame, (W, H))
 

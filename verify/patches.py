@@ -32,6 +32,9 @@ heatmaps compare one to one:
 - ``UNSEEN/heatmap.npy`` (ours, the verdict's) is the worst tenth's mean of
   :func:`verify.corroborate.unseen`, per pixel the smaller of CHROMA and CORROB: a hue
   that neither the rebuilt view nor the totem rays explain.
+- ``ABSENT/heatmap.npy`` (ours, the verdict's) is the worst tenth's mean of
+  :func:`verify.absence.absence`: a hue two totems saw at a point in front of the
+  surface that the photo shows nowhere along their lines of sight (a removed object).
 
 Heatmaps hold all 900 patches, as the NeRF path's; which patches are *kept* (overlap the
 protected region) is a separate array. Totem pixels never enter a patch score (above the
@@ -89,7 +92,7 @@ gave colour 0.931, insert 0.803. RANGE keeps the mean: pooled by its worst pixel
 reads every edge the rebuilt view misplaces (held-out threshold 0.14 -> 0.44, colour AP
 0.85 -> 0.83)."""
 
-POOLED_BY_WORST = ("CHROMA", "CORROB", "UNSEEN")
+POOLED_BY_WORST = ("CHROMA", "CORROB", "UNSEEN", "ABSENT")
 """Metrics whose patch score is :func:`patch_top_means`; the others (L1 and SSIM as the
 NeRF path writes them, RANGE) are patch means."""
 
@@ -98,9 +101,10 @@ CHROMA_BLUR_PX = 3.0
 detail finer than its totem rays' spacing (about 3 px at 640x480), so neither should the
 photo it is compared with."""
 
-METRICS = ("L1", "SSIM", "CHROMA", "RANGE", "CORROB", "UNSEEN")
-"""Every heatmap verify writes; CORROB (:mod:`verify.corroborate`) needs the fit's
-totem rays and is absent for a fit written without them (UNSEEN is then CHROMA's)."""
+METRICS = ("L1", "SSIM", "CHROMA", "RANGE", "CORROB", "UNSEEN", "ABSENT")
+"""Every heatmap verify writes; CORROB (:mod:`verify.corroborate`) and ABSENT
+(:mod:`verify.absence`) need the fit's totem rays and are not written for a fit saved
+without them (UNSEEN is then CHROMA's)."""
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,10 @@ import numpy as np
 from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.errors import BadInput
-from verify import corroborate, patches, region, verdict as verdict_mod
+from verify import absence, corroborate, patches, region, verdict as verdict_mod
 
-VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1, "UNSEEN": 0.1}
+VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1, "UNSEEN": 0.1,
+             "ABSENT": 0.1}
 """Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
 
 The pictures are scaled to the largest kept patch, as the NeRF path scales per image,
@@ -156,6 +157,11 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
             FrustumFrame.from_dict(fit.grid), image)
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
+    if rays is not None:
+        errors["ABSENT"] = absence.absence(
+            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in,
+            FrustumFrame.from_dict(fit.grid), image, totem_mask, scene.K,
+            getattr(fit, "recon_depth", None))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     seen = protected & ~totem_mask
     cover = patches.patch_fraction(seen, grid)
