@@ -52,3 +52,18 @@ def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
         "box-1": "ok", "box-1-color": "ok", "box-1-broken": "failed"}
     md = (out / "bench.md").read_text()
     assert "Failed runs" in md and "box-1-broken" in md and "| color |" in md
+
+    # --reverify: the same verdicts from the fit already there, which is left untouched
+    fit_json = out / "runs" / "box-1-joint" / "fit" / "fit.json"
+    before = fit_json.read_bytes(), fit_json.stat().st_mtime_ns
+    proc = totems("bench", root, "--out", out, "--no-table1", "--reverify")
+    assert proc.returncode == 0, proc.stderr
+    again = json.loads((out / "bench.json").read_text())
+    rerun = {r["name"]: r for r in again["runs"]}
+    assert rerun["box-1"]["reverified"] and again["fits"] == 1     # only the broken one
+    assert (fit_json.read_bytes(), fit_json.stat().st_mtime_ns) == before
+    for name in ("box-1", "box-1-color"):
+        assert rerun[name]["verdict"] == runs[name]["verdict"]
+        assert rerun[name]["metrics"]["recon_L1"] == pytest.approx(   # recon.png: 8 bit
+            runs[name]["metrics"]["recon_L1"], abs=1e-3)
+    assert "verified again" in (out / "bench.md").read_text()

@@ -163,7 +163,7 @@ def cmd_bench(args) -> dict:
     from verify.bench import run_bench
 
     bench = run_bench(args.dirs, args.out, jobs=args.jobs, table1=not args.no_table1,
-                      refit=args.refit,
+                      refit=args.refit, reverify=args.reverify,
                       progress=_progress(args))
     return {"bench": str(args.out), "scenes": bench["scenes"],
             "failed": len(bench["summary"]["failed"]), "wall_s": bench["wall_s"]}
@@ -309,6 +309,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the initial-pose and oracle-pose fits of untouched scenes")
     v.add_argument("--refit", action="store_true",
                    help="fit every scene, even one whose totem pixels another's fit serves")
+    v.add_argument("--reverify", action="store_true",
+                   help="verify again on the fits an earlier bench left in OUT (after a "
+                        "change to verify/ alone) instead of fitting")
 
     v = verb("calib", cmd_calib, "camera calibration from checkerboard photos")
     v.add_argument("images", nargs="+", help="photos of a printed checkerboard")
