@@ -27,13 +27,13 @@ def run(*args) -> int:
 
 
 def _verdict(scene: Path) -> str:
-    """'consistent\nRANGE 0.060 of 0.140, UNSEEN 0.003 of 0.041' from the scene's report.json,
-    or ''."""
+    """'consistent\nRANGE 0.060/0.140  UNSEEN 0.003/0.062 ...' (each judging metric's
+    score over its threshold) from the scene's report.json, or ''."""
     path = scene / "totems-out/verify/report.json"
     if not path.is_file():
         return ""
     r = json.loads(path.read_text())
-    each = ", ".join(f"{k} {v['score']:.3f} of {v['threshold']:.3f}"
+    each = "  ".join(f"{k} {v['score']:.3f}/{v['threshold']:.3f}"
                      for k, v in r.get("scores", {}).items())
     return f"{r['verdict']}\n{each}"
 
@@ -56,7 +56,7 @@ def picture(untouched: Path, tampered: Path, out: Path) -> None:
     for ax, (path, title) in zip(axes.ravel(), panels):
         if path.is_file():
             ax.imshow(read_image(path))
-        ax.set_title(title)
+        ax.set_title(title, fontsize=9)
         ax.axis("off")
     fig.tight_layout()
     fig.savefig(out, dpi=80)

@@ -31,12 +31,13 @@ object's side and the camera does not (it sees the object), which would read as
 missing; a removed object was in front of what the photo now shows. ``A`` is NaN where
 no slice has two totems landing.
 
-Measured offline on the standard set's fits (640 x 480, box and envmap seeds 1-5,
-2026-12-01), patch AP of ABSENT against UNSEEN: inpaint 0.48 / 0.34, remove 0.38 /
-0.36; with its threshold set by the held-out rule it flagged two inpaintings that no
-other metric did (box seed 5, envmap seed 2) and no untouched photo. Without the
-in-front rule the held-out untouched scores reached 0.093 (box seed 17, where the
-totems see a ball the camera sees only the edge of), as high as any removal's.
+Measured on the standard set (`totems bench`, 640 x 480, box and envmap seeds 1-5,
+2026-12-01), patch AP of ABSENT against UNSEEN: inpaint 0.468 / 0.343, remove 0.375 /
+0.360, shift 0.569 / 0.501; with its threshold set by the held-out rule
+(``verify.verdict.ABSENT_THRESHOLD``) it flagged two inpaintings that no other metric
+did (envmap seeds 2 and 3) and no untouched photo. Without the in-front rule the
+held-out untouched scores reached 0.093 (box seed 17, where the totems see a ball the
+camera sees only the edge of), as high as any removal's.
 
 Limits: a removed object whose hue appears elsewhere along the totems' lines of sight
 (the grass of the box scenes, a second object of the same colour) is not missed;
