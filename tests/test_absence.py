@@ -110,3 +110,11 @@ def test_what_lies_behind_the_fitted_surface_is_not_judged(rays):
     # and with no depth at all every slice is judged, as at the card's own depth
     free = absence(*rays, photo, none, K, None, cell_px=CELL, n_slices=48)
     assert np.nanmedian(free[card]) >= np.nanmedian(at[card]) - 1e-9
+
+
+def test_two_totems_cannot_tell(rays):
+    o, d, radiance, js, cos_in, frame = rays
+    two = js < 2
+    A = absence(o[two], d[two], radiance[two], js[two], cos_in[two], frame,
+                camera_view(False), np.zeros((H, W), bool), K, None, cell_px=CELL)
+    assert np.isnan(A).all()
