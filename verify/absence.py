@@ -45,7 +45,12 @@ held-out untouched scores reached 0.093 (box seed 17, where the totems see a bal
 camera sees only the edge of), as high as any removal's; 6 slices' tolerance instead of
 3 changed nothing. Searching each ray's line only up to where it passes behind the
 fitted surface raised the AP (0.515 / 0.395) and an untouched score too (0.109, envmap
-seed 18), so that nothing was flagged.
+seed 18), so that nothing was flagged. Many removed objects differ from what replaced
+them in brightness more than in hue (box seeds 3 and 5: grey and dark green on a
+lighter floor); adding the grey level to the distance (weight 1 or 0.5) gave 0.595 /
+0.525 and 0.647 / 0.568, but the rays' brightness (Fresnel and reflection undone only
+roughly) raised the held-out untouched scores to 0.074 and 0.050: 1 and 2 edits flagged
+against 4.
 
 Limits: a removed object whose hue appears elsewhere along the totems' lines of sight
 (the grass of the box scenes, a second object of the same colour) is not missed;

@@ -33,7 +33,7 @@ heatmaps compare one to one:
   :func:`verify.corroborate.unseen`, per pixel the smaller of CHROMA and CORROB: a hue
   that neither the rebuilt view nor the totem rays explain.
 - ``ABSENT/heatmap.npy`` (ours, the verdict's) is the worst tenth's mean of
-  :func:`verify.absence.absence`: a hue two totems saw at a point in front of the
+  :func:`verify.absence.absence`: a hue three totems saw at a point in front of the
   surface that the photo shows nowhere along their lines of sight (a removed object).
 
 Heatmaps hold all 900 patches, as the NeRF path's; which patches are *kept* (overlap the

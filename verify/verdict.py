@@ -19,14 +19,15 @@ The photo is *inconsistent* when any metric's score exceeds its threshold
 within 16 px (a grey, black or white patch, which has no hue); UNSEEN sees a hue that
 neither the rebuilt view shows nearby nor two totems see at one depth along the pixel's
 ray. Both forgive the view's blur, its brightness where it varies nearby, and edges a
-few pixels off. ABSENT sees the converse, what the photo lacks: a hue two totems saw
+few pixels off. ABSENT sees the converse, what the photo lacks: a hue three totems saw
 in front of the surface that the photo shows nowhere along their lines of sight (an
-object removed or inpainted away, whose background UNSEEN finds explained). Plain L1 judged before RANGE and had to sit above the view's every
-misplaced edge (threshold 0.448): measured on the standard set (2026-12-01, 10
-untouched, 58 edits, the same fits), UNSEEN with L1 flagged 21 edits, UNSEEN with RANGE
-24 (two more splices, one more shift; L1's only own catch, a shift on envmap seed 3,
-RANGE makes too). The other heatmaps (L1, SSIM, CHROMA, CORROB) are listed beside each
-driver.
+object removed or inpainted away, whose background UNSEEN finds explained). Plain L1
+judged before RANGE and had to sit above the view's every misplaced edge (threshold
+0.448): measured on the standard set (2026-12-01, 10 untouched, 58 edits, the same
+fits, patch means), UNSEEN with L1 flagged 21 edits, UNSEEN with RANGE 24 (two more
+splices, one more shift; L1's only own catch, a shift on envmap seed 3, RANGE makes
+too). With the hue metrics scored by each patch's worst tenth (31) and ABSENT: 34. The
+other heatmaps (L1, SSIM, CHROMA, CORROB) are listed beside each driver.
 Subtracting the median makes a global colour/exposure offset between photo and recon
 harmless and follows the scene's reconstruction quality. The excess stays in absolute
 units (no division by the spread of s_p) because the spread is dominated by the
