@@ -72,6 +72,7 @@ from the totems.
 Public
 ------
 ``line_absence(o, d, colour, image, valid, K) -> (m,)``
+``in_view(d, K, size) -> (m,) bool``
 ``absence(o, d, radiance, totem, cos_in, frame, image, totem_mask, K, depth) -> (H, W)``
 """
 

@@ -152,16 +152,15 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     errors = patches.pixel_errors(image, recon)
     rays = getattr(fit, "rays", None)
     if rays is not None:
+        frame = FrustumFrame.from_dict(fit.grid)
         errors["CORROB"] = corroborate.corroboration(
-            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in,
-            FrustumFrame.from_dict(fit.grid), image)
+            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image)
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
     if rays is not None:
         errors["ABSENT"] = absence.absence(
-            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in,
-            FrustumFrame.from_dict(fit.grid), image, totem_mask, scene.K,
-            getattr(fit, "recon_depth", None))
+            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image,
+            totem_mask, scene.K, getattr(fit, "recon_depth", None))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     seen = protected & ~totem_mask
     cover = patches.patch_fraction(seen, grid)
