@@ -32,6 +32,11 @@ its worst patches at the hull's left edge) and 0.052-0.141 filled; patch AP (L1)
 0.610 -> 0.623, splice 0.706 -> 0.755, inpaint 0.145 -> 0.154, removal 0.160 -> 0.175,
 insertion 0.237 -> 0.251, shift 0.271 -> 0.277; the region covers 74 % of the photo instead of 82 %.
 Three shifts on envmap scenes that the hull flagged (0.26-0.31) score 0.05-0.17 filled.
+Keeping only the pixels of dense boxes (no closing) was measured with the current verdict
+(2026-12-01, same fits): the same edits flagged, UNSEEN patch AP within 0.03 (shift 0.49
+-> 0.52), and box seed 2's untouched score, driven by a box the totems do not see behind
+a sphere, went up (0.056 -> 0.059), not down: the patches it drives hold the sphere
+too, which the totems see densely.
 
 References
 ----------
