@@ -189,19 +189,18 @@ def absence(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, totem_mas
     K = np.asarray(K, np.float64)
     d = np.asarray(d, np.float64)
     keep = (np.asarray(cos_in) >= cos_min) & in_view(d, K, (W, H))
-    totem = np.asarray(totem)
-    if len(np.unique(totem[keep])) < min_totems:
+    o, d, totem = np.asarray(o, np.float64)[keep], d[keep], np.asarray(totem)[keep]
+    if len(np.unique(totem)) < min_totems:
         return np.full((H, W), np.nan)
     colour = linear_to_srgb(np.clip(np.asarray(radiance, np.float64)[keep], 0.0, 1.0))
     blurred = ndimage.gaussian_filter(image, (sigma_px, sigma_px, 0))
-    a = line_absence(np.asarray(o, np.float64)[keep], d[keep], colour, blurred,
-                     ~np.asarray(totem_mask, bool), K)
+    a = line_absence(o, d, colour, blurred, ~np.asarray(totem_mask, bool), K)
     ok = np.isfinite(a)
-    if len(np.unique(totem[keep][ok])) < min_totems:
+    if len(np.unique(totem[ok])) < min_totems:
         return np.full((H, W), np.nan)
     res = corroborate.map_res(frame, cell_px)
-    sc = slice_colours(np.asarray(o, np.float64)[keep][ok], d[keep][ok], a[ok, None],
-                       totem[keep][ok], frame, res, n_slices=n_slices, sigma=sigma)
+    sc = slice_colours(o[ok], d[ok], a[ok, None], totem[ok], frame, res,
+                       n_slices=n_slices, sigma=sigma)
     per = np.where(sc.land, sc.colour[..., 0], -np.inf)       # (n_tot, nk, nt, ns)
     if depth is not None:
         uu, vv = corroborate.cell_centres(frame, res)

@@ -151,16 +151,15 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     grid = patches.patch_grid(totem_mask)
     errors = patches.pixel_errors(image, recon)
     rays = getattr(fit, "rays", None)
-    if rays is not None:
+    if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)
         errors["CORROB"] = corroborate.corroboration(
             rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image)
-    errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
-                                          errors.get("CORROB", np.nan))
-    if rays is not None:
         errors["ABSENT"] = absence.absence(
             rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image,
             totem_mask, scene.K, getattr(fit, "recon_depth", None))
+    errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
+                                          errors.get("CORROB", np.nan))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     seen = protected & ~totem_mask
     cover = patches.patch_fraction(seen, grid)
