@@ -7,7 +7,11 @@ For each untouched scene of SET with ground truth, and its ``joint`` run in BENC
 (``totems bench``), prints the recon L1 of the run and of the true-depth splat, both
 over the run's protected region (totem pixels excluded): the first minus the second is
 what the fit's geometry costs; the second is what the totems' sampling allows with
-this simple splat (pull-push between the rays).
+this simple splat (pull-push between the rays). The third column is how bright the totem
+rays are against the truth where they meet the surface the camera sees (mean sRGB of
+the rays over the truth's there, the glass's reflection taken off as the fit starts):
+above 1, the rays carry light the model does not take off, and any view splatted or
+fitted from them is that much too bright.
 """
 
 from __future__ import annotations
@@ -40,8 +44,10 @@ def true_depth(desc: dict) -> np.ndarray:
     return z.reshape(H, W)
 
 
-def true_depth_view(scene, truth, desc) -> np.ndarray:
-    """The camera view splatted from the totem rays (true centres) at the true depth."""
+def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float]:
+    """The camera view splatted from the totem rays (true centres) at the true depth,
+    and the rays' brightness against the truth where they meet that surface (ratio of
+    mean sRGB over the rays that meet it inside the image)."""
     from inverse import backend, camera, sphere
     from inverse.fit import _totem_pixels
     from inverse.grid import frame_for_scene
@@ -81,7 +87,12 @@ def true_depth_view(scene, truth, desc) -> np.ndarray:
     rows = np.clip(np.round(v0 + (np.arange(nt) + 0.5) / nt * (v1 - v0)), 0, H - 1)
     depth = np.minimum(z[rows.astype(int)][:, cols.astype(int)], frame.far)
     uu, vv, _, hit = surface_hits(o[keep], d_out[keep], frame, depth)
-    return linear_to_srgb(np.clip(splat_image(uu, vv, lin[keep], (W, H), hit=hit), 0, 1))
+    view = linear_to_srgb(np.clip(splat_image(uu, vv, lin[keep], (W, H), hit=hit), 0, 1))
+    ui, vi = (np.round(np.where(hit, x, -1.0)).astype(int) for x in (uu, vv))
+    met = hit & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+    rays = linear_to_srgb(np.clip(lin[keep][met], 0, None))
+    there = np.asarray(truth.clean, np.float64)[vi[met], ui[met]]
+    return view, float(rays.mean() / max(there.mean(), 1e-9))
 
 
 def main(argv=None) -> int:
@@ -101,13 +112,16 @@ def main(argv=None) -> int:
         seen = folder.read_mask(run / "protect_mask.png") & ~scene.masks.any(0)
         clean = np.asarray(truth.clean, np.float64)
         fitted = np.abs(folder.read_image(run / "recon.png") - clean).mean(2)[seen].mean()
-        bound = np.abs(true_depth_view(scene, truth, desc) - clean).mean(2)[seen].mean()
-        rows.append((sd.name, fitted, bound))
-        print(f"{sd.name:12s} recon L1 {fitted:.3f}   true-depth splat {bound:.3f}", flush=True)
+        view, bright = true_depth_view(scene, truth, desc)
+        bound = np.abs(view - clean).mean(2)[seen].mean()
+        rows.append((sd.name, fitted, bound, bright))
+        print(f"{sd.name:12s} recon L1 {fitted:.3f}   true-depth splat {bound:.3f}   "
+              f"ray brightness {bright:.2f}", flush=True)
     for preset in sorted({r[0].rsplit("-", 1)[0] for r in rows}):
         sel = [r for r in rows if r[0].rsplit("-", 1)[0] == preset]
         print(f"{preset:12s} mean recon L1 {np.mean([r[1] for r in sel]):.3f}   "
-              f"true-depth splat {np.mean([r[2] for r in sel]):.3f}   (n={len(sel)})")
+              f"true-depth splat {np.mean([r[2] for r in sel]):.3f}   "
+              f"ray brightness {np.mean([r[3] for r in sel]):.2f}   (n={len(sel)})")
     return 0
 
 
