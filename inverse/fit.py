@@ -21,6 +21,20 @@ radiance) in place of the one colour took light from the scene (5x the true refl
 rendered by Mitsuba with the glass's transmission off; recon L1 box 0.10 -> 0.16,
 envmap 0.08 -> 0.16); and subtracting that true reflection from the totem pixels
 before the fit left the view no better (envmap seeds 1, 2: 0.065 -> 0.071, 0.067 -> 0.074).
+The rays still carry light the model does not take off: where they meet the surface
+the camera sees, they are 1.35x as bright as the truth on envmap scenes and 1.09x on
+box scenes (``benchmarks/geometry_bound.py``, seeds 1-5; the environment behind the
+camera is bright, and the glass reflects it at its front and again inside). Three
+models of it were fitted on envmap seeds 1, 3 and 5 and box seed 1 (2026-12-01,
+640x480; recon L1 against 0.065 / 0.123 / 0.094 and 0.059) and dropped: the reflected
+weight ``R (1 + T_F)`` (the path reflected once inside the sphere too), 0.063 / 0.172
+/ 0.095 and 0.059 (seed 3 then took the stereo view, which suits it worse); one
+ambient colour per totem, 0.063 and 0.060; the one colour learnt ten times faster,
+the same colour (linear 0.54, 0.12, 0.05 on seed 1) and view; an ambient linear in the reflected
+direction (first-order spherical harmonics), 0.074 / 0.126, although the held-out
+totems' error fell (0.067 -> 0.060 on seed 1). The brightness is not what keeps
+envmap above 0.08: the view scaled by the oracle gain (the truth's mean over the
+view's) averages 0.082.
 
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the
