@@ -158,6 +158,8 @@ class FitResult:
     settings: dict = field(default_factory=dict)
     scene_fingerprint: str = ""
     geometry: dict = field(default_factory=dict)  # chosen geometry, hold-out errors
+    ambient: list = field(default_factory=list)   # fitted linear RGB the glass reflects
+                                                  # ([] without FitSettings.reflection)
     rays: "TotemRays | None" = None  # the totem pixels' rays leaving the glass
 
 
@@ -533,7 +535,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene), geometry=geometry,
-                     rays=rays)
+                     rays=rays, ambient=[float(x) for x in np.maximum(
+                         np.asarray(ambient, np.float64), 0.0)] if settings.reflection else [])
 
 
 def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, observed,
@@ -719,8 +722,8 @@ def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) 
         "centers": np.asarray(result.centers).tolist(),
         "initial": np.asarray(result.initial).tolist(),
         "history": result.history, "timings": result.timings,
-        "geometry": result.geometry, "settings": result.settings,
-        "versions": backend.describe()})
+        "geometry": result.geometry, "ambient": list(result.ambient),
+        "settings": result.settings, "versions": backend.describe()})
 
 
 def load_fit(fit_dir) -> FitResult:
@@ -771,7 +774,8 @@ def load_fit(fit_dir) -> FitResult:
                      history=meta.get("history", {}), timings=meta.get("timings", {}),
                      settings=meta.get("settings", {}),
                      scene_fingerprint=str(meta.get("scene_fingerprint", "")),
-                     geometry=meta.get("geometry", {}), rays=rays)
+                     geometry=meta.get("geometry", {}), rays=rays,
+                     ambient=list(meta.get("ambient", [])))
 
 
 def render_grid(grid: dict, size, *, n: int = 128):

@@ -228,6 +228,9 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
     assert back.scene_fingerprint == fit.scene_fingerprint(scene)
+    # The fitted colour the glass reflects is kept: linear RGB, non-negative.
+    assert back.ambient == r.ambient and len(r.ambient) == 3
+    assert min(r.ambient) >= 0.0 and max(r.ambient) > 0.0
     # The totem rays verify reads leave the fitted spheres outwards, unit, and come back.
     rays = back.rays
     P = r.centers[rays.totem]
