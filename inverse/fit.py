@@ -28,13 +28,14 @@ camera is bright, and the glass reflects it at its front and again inside). Thre
 models of it were fitted on envmap seeds 1, 3 and 5 and box seed 1 (2026-12-01,
 640x480; recon L1 against 0.065 / 0.123 / 0.094 and 0.059) and dropped: the reflected
 weight ``R (1 + T_F)`` (the path reflected once inside the sphere too), 0.063 / 0.172
-/ 0.095 and 0.059 (seed 3 then took the stereo view, which suits it worse); one
-ambient colour per totem, 0.063 and 0.060; the one colour learnt ten times faster,
-the same colour (linear 0.54, 0.12, 0.05 on seed 1) and view; an ambient linear in the reflected
-direction (first-order spherical harmonics), 0.074 / 0.126, although the held-out
-totems' error fell (0.067 -> 0.060 on seed 1). The brightness is not what keeps
-envmap above 0.08: the view scaled by the oracle gain (the truth's mean over the
-view's) averages 0.082.
+/ 0.095 and 0.059 (seed 3 then took the stereo view, which suits it worse); that
+weight with one ambient colour per totem, 0.063 (envmap seed 1) and 0.060 (box seed
+1); an ambient linear in the reflected direction (first-order spherical harmonics),
+0.074 / 0.126 on envmap seeds 1 and 3, although the held-out
+totems' error fell (0.067 -> 0.060 on seed 1). The one colour learnt ten times faster
+comes to the same (linear 0.54, 0.12, 0.05 on seed 1) and so does the view. The
+brightness is not what keeps envmap above 0.08: the view scaled by the oracle gain
+(the truth's mean over the view's) averages 0.082.
 
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the
@@ -529,14 +530,15 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         i += s
     if steady is not None:
         timings["compile_s_estimate"] = float(sum(max(0.0, f - steady) for f in firsts))
+    amb_fit = [float(x) for x in np.maximum(np.asarray(ambient, np.float64), 0.0)] \
+        if settings.reflection else []
     grid = {"density": density, "colour": colour, **frame.to_dict(),
             "n_samples": np.int64(settings.n_samples)}
     return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene), geometry=geometry,
-                     rays=rays, ambient=[float(x) for x in np.maximum(
-                         np.asarray(ambient, np.float64), 0.0)] if settings.reflection else [])
+                     rays=rays, ambient=amb_fit)
 
 
 def _photo_error(itg, frame, density, colour, centers, radius, ior, d_cam, jt, observed,
