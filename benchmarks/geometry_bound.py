@@ -51,7 +51,7 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float]:
     from inverse import backend, camera, sphere
     from inverse.fit import _totem_pixels
     from inverse.grid import frame_for_scene
-    from inverse.splat import splat_image, surface_hits
+    from inverse.splat import _pixels, splat_image, surface_hits
     from scenes.render import linear_to_srgb, srgb_to_linear
     backend.use()
     import mitsuba as mi
@@ -88,8 +88,7 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float]:
     depth = np.minimum(z[rows.astype(int)][:, cols.astype(int)], frame.far)
     uu, vv, _, hit = surface_hits(o[keep], d_out[keep], frame, depth)
     view = linear_to_srgb(np.clip(splat_image(uu, vv, lin[keep], (W, H), hit=hit), 0, 1))
-    ui, vi = (np.round(np.where(hit, x, -1.0)).astype(int) for x in (uu, vv))
-    met = hit & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+    ui, vi, met = _pixels(uu, vv, hit, (W, H))
     rays = linear_to_srgb(np.clip(lin[keep][met], 0, None))
     there = np.asarray(truth.clean, np.float64)[vi[met], ui[met]]
     return view, float(rays.mean() / max(there.mean(), 1e-9))

@@ -60,7 +60,8 @@ def main(argv=None) -> int:
     p.add_argument("--presets", default="box,envmap")
     p.add_argument("--kinds", default=",".join(KINDS))
     args = p.parse_args(argv)
-    seeds = range(args.first_seed, args.first_seed + (args.seeds or (2 if args.small else 5)))
+    n_seeds = args.seeds or (2 if args.small else 5)
+    seeds = range(args.first_seed, args.first_seed + n_seeds)
     size = (320, 240) if args.small else (640, 480)
     counts = (2, 4, 6) if args.totems_study else (4,)
     made = build(args.out, presets=args.presets.split(","), seeds=seeds, size=size,

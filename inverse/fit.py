@@ -31,11 +31,11 @@ weight ``R (1 + T_F)`` (the path reflected once inside the sphere too), 0.063 / 
 / 0.095 and 0.059 (seed 3 then took the stereo view, which suits it worse); that
 weight with one ambient colour per totem, 0.063 (envmap seed 1) and 0.060 (box seed
 1); an ambient linear in the reflected direction (first-order spherical harmonics),
-0.074 / 0.126 on envmap seeds 1 and 3, although the held-out
-totems' error fell (0.067 -> 0.060 on seed 1). The one colour learnt ten times faster
-comes to the same (linear 0.54, 0.12, 0.05 on seed 1) and so does the view. The
-brightness is not what keeps envmap above 0.08: the view scaled by the oracle gain
-(the truth's mean over the view's) averages 0.082.
+0.074 / 0.126 on envmap seeds 1 and 3, although the held-out totems' error fell (0.067
+-> 0.060 on seed 1). The one colour learnt ten times faster comes to the same (linear
+0.54, 0.12, 0.05 on seed 1) and so does the view. The brightness is not what keeps
+envmap above 0.08: the view scaled by the oracle gain (the truth's mean over the
+view's) averages 0.082.
 
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the

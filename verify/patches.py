@@ -73,8 +73,9 @@ CHROMA_RADIUS_PX = 16
 """How far (pixels) the reconstruction may be off: the photo's chroma is compared with the
 range of the reconstruction's chroma over a (2r+1)-pixel square. Measured on the
 standard set's saved reconstructions (640x480, box and envmap seeds 1-5, 58 edits),
-patch AP of the chroma distance against plain L1 (both patch means): colour 0.91 / 0.69, splice 0.84 /
-0.77, insert 0.58 / 0.24, remove 0.37 / 0.22, inpaint 0.29 / 0.19, shift 0.36 / 0.31.
+patch AP of the chroma distance against plain L1 (both patch means): colour 0.91 /
+0.69, splice 0.84 / 0.77, insert 0.58 / 0.24, remove 0.37 / 0.22, inpaint 0.29 / 0.19,
+shift 0.36 / 0.31.
 A radius of 8 gained 0.03-0.04 on inpaint, remove and shift and lost 0.02-0.05 on
 colour, splice and insert; 24 the reverse. 16 is a quarter of a patch. Rechecked with
 the hue metrics' worst-tenth scores (2026-12-01): UNSEEN patch AP with radius 8 / 12 /
@@ -287,11 +288,12 @@ def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
     The box of per-channel ranges is loose in a colourful neighbourhood (a pastel on red
     next to green passes). The distance to the *nearest* reconstructed chroma within the
     radius instead (offsets on a 2-px lattice) was measured on the standard set's fits
-    (2026-12-01, with plain patch means): UNSEEN patch AP colour 0.918 -> 0.920, insert 0.708 -> 0.730, shift
-    0.479 -> 0.527, splice 0.833 -> 0.822; one more edit flagged (25 of 58), the
-    held-out threshold 0.041 -> 0.043; 3 s more per photo. Not adopted: the gains are
-    small, and where the reconstruction is sharp it holds no blend of two neighbours'
-    colours for the blurred photo's edge between them to match (the box does).
+    (2026-12-01, with plain patch means): UNSEEN patch AP colour 0.918 -> 0.920,
+    insert 0.708 -> 0.730, shift 0.479 -> 0.527, splice 0.833 -> 0.822; one more edit
+    flagged (25 of 58), the held-out threshold 0.041 -> 0.043; 3 s more per photo. Not
+    adopted: the gains are small, and where the reconstruction is sharp it holds no
+    blend of two neighbours' colours for the blurred photo's edge between them to match
+    (the box does).
 
     Parameters
     ----------

@@ -19,8 +19,8 @@ from scenes import folder
 from scenes.errors import BadInput
 from verify import absence, corroborate, patches, region, verdict as verdict_mod
 
-VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1, "UNSEEN": 0.1,
-             "ABSENT": 0.1}
+VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1,
+             "UNSEEN": 0.1, "ABSENT": 0.1}
 """Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
 
 The pictures are scaled to the largest kept patch, as the NeRF path scales per image,
