@@ -11,7 +11,9 @@ this simple splat (pull-push between the rays). The third column is how bright t
 rays are against the truth where they meet the surface the camera sees (mean sRGB of
 the rays over the truth's there, the glass's reflection taken off as the fit starts):
 above 1, the rays carry light the model does not take off, and any view splatted or
-fitted from them is that much too bright.
+fitted from them is that much too bright. The fourth is the same splat of the truth's own
+colours where the rays land: what the totems' sampling alone allows, were the rays'
+colours exact.
 """
 
 from __future__ import annotations
@@ -44,10 +46,11 @@ def true_depth(desc: dict) -> np.ndarray:
     return z.reshape(H, W)
 
 
-def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float]:
+def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     """The camera view splatted from the totem rays (true centres) at the true depth,
-    and the rays' brightness against the truth where they meet that surface (ratio of
-    mean sRGB over the rays that meet it inside the image)."""
+    the rays' brightness against the truth where they meet that surface (ratio of
+    mean sRGB over the rays that meet it inside the image), and the view splatted the
+    same way from the truth's colours at the pixels those rays meet."""
     from inverse import backend, camera, sphere
     from inverse.fit import _totem_pixels
     from inverse.grid import frame_for_scene
@@ -91,7 +94,9 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float]:
     ui, vi, met = _pixels(uu, vv, hit, (W, H))
     rays = linear_to_srgb(np.clip(lin[keep][met], 0, None))
     there = np.asarray(truth.clean, np.float64)[vi[met], ui[met]]
-    return view, float(rays.mean() / max(there.mean(), 1e-9))
+    sampled = splat_image(uu[met], vv[met], srgb_to_linear(there), (W, H))
+    sampled = linear_to_srgb(np.clip(sampled, 0, 1))
+    return view, float(rays.mean() / max(there.mean(), 1e-9)), sampled
 
 
 def main(argv=None) -> int:
@@ -111,16 +116,18 @@ def main(argv=None) -> int:
         seen = folder.read_mask(run / "protect_mask.png") & ~scene.masks.any(0)
         clean = np.asarray(truth.clean, np.float64)
         fitted = np.abs(folder.read_image(run / "recon.png") - clean).mean(2)[seen].mean()
-        view, bright = true_depth_view(scene, truth, desc)
+        view, bright, sampled = true_depth_view(scene, truth, desc)
         bound = np.abs(view - clean).mean(2)[seen].mean()
-        rows.append((sd.name, fitted, bound, bright))
+        exact = np.abs(sampled - clean).mean(2)[seen].mean()
+        rows.append((sd.name, fitted, bound, bright, exact))
         print(f"{sd.name:12s} recon L1 {fitted:.3f}   true-depth splat {bound:.3f}   "
-              f"ray brightness {bright:.2f}", flush=True)
+              f"ray brightness {bright:.2f}   exact colours {exact:.3f}", flush=True)
     for preset in sorted({r[0].rsplit("-", 1)[0] for r in rows}):
         sel = [r for r in rows if r[0].rsplit("-", 1)[0] == preset]
         print(f"{preset:12s} mean recon L1 {np.mean([r[1] for r in sel]):.3f}   "
               f"true-depth splat {np.mean([r[2] for r in sel]):.3f}   "
-              f"ray brightness {np.mean([r[3] for r in sel]):.2f}   (n={len(sel)})")
+              f"ray brightness {np.mean([r[3] for r in sel]):.2f}   "
+              f"exact colours {np.mean([r[4] for r in sel]):.3f}   (n={len(sel)})")
     return 0
 
 
