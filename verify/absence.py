@@ -52,7 +52,12 @@ Also tried and not adopted (four edits flagged by ABSENT alone, as above, unless
   differ from what replaced them in brightness more than in hue (box seeds 3 and 5:
   grey and dark green on a lighter floor): 0.595 / 0.525 and 0.647 / 0.568, but the
   rays' brightness (Fresnel and reflection undone only roughly) raised the held-out
-  untouched scores to 0.074 and 0.050: 1 and 2 edits flagged;
+  untouched scores to 0.074 and 0.050: 1 and 2 edits flagged; nor with the rays' grey
+  level first mapped onto the photo's by a per-scene fit (2026-12-02), from each ray's
+  best hue match on its line over the better half of the rays: a gain (median ratio)
+  or a line (trimmed least squares). The held-out untouched scores rose to 0.104 and
+  0.070 (weight 1), the patch AP fell to 0.513 / 0.462 and 0.589 / 0.411, and no edit
+  is flagged (weight 0.5: 0.591 / 0.422, 2 flagged) against 5 by hue alone;
 - rays darker than sRGB 0.1 / 0.15 / 0.2 (mean of the channels) left out, since in the
   dark what the glass reflects outweighs the hue: 5 / 9 / 9 edits flagged, but with
   0.15 and 0.2 an untouched photo of the standard set is too (envmap seed 5 or 1, 0.026
