@@ -11,9 +11,9 @@ this simple splat (pull-push between the rays). The third column is how bright t
 rays are against the truth where they meet the surface the camera sees (mean sRGB of
 the rays over the truth's there, the glass's reflection taken off as the fit starts):
 above 1, the rays carry light the model does not take off, and any view splatted or
-fitted from them is that much too bright. The fourth is the same splat of the truth's own
-colours where the rays land: what the totems' sampling alone allows, were the rays'
-colours exact.
+fitted from them is that much too bright. The fourth is the same splat of the truth's
+own colours where the rays land: what the totems' sampling alone allows, were the
+rays' colours exact.
 """
 
 from __future__ import annotations

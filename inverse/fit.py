@@ -37,21 +37,22 @@ weight with one ambient colour per totem, 0.063 (envmap seed 1) and 0.060 (box s
 envmap above 0.08: the view scaled by the oracle gain (the truth's mean over the
 view's) averages 0.082.
 
-What the rays carry beyond the scene is mostly that reflected environment, and it
-is not separable by the models here (measured 2026-12-02, envmap seeds 1-5, 640x480).
-Against the truth where the rays land (true centres and depth), a lat-long map of the
-environment (16 x 32) seen along the two reflected paths, the front surface's
-(Fresnel ``F``) and the one reflected once inside (``(1 - F)^2 F``), fitted by least
-squares to what the truth leaves unexplained, each totem's map from the other three,
-takes the rays' sRGB error from 0.074-0.098 to 0.052-0.078 and the view splatted at
-the true depth from 0.100 to 0.076 on average (0.079 -> 0.059, 0.092 -> 0.075, 0.119
--> 0.088, 0.102 -> 0.060, 0.107 -> 0.099); the front path alone does less (seed 3:
-0.097). Without the truth the map takes scene light: fitted to what the grid leaves
-unexplained, the view stayed as it was (seeds 1, 2, 3, 5: 0.065, 0.068, 0.122, 0.094)
-and the stereo's hold-out did not improve (seed 3: 0.099 -> 0.117); fitted to what the other totems' rays predict at the
-grid's depth, the view splatted there went 0.073 -> 0.068 and 0.124 -> 0.113 on seeds
-1 and 3, but the grid's own view, which the hold-out still prefers, stays 0.065 and
-0.120. (The same map in the loss, in log radiance, took scene light too: see above.)
+What the rays carry beyond the scene is mostly that reflected environment, and it is not
+separable by the models here (measured 2026-12-02, envmap seeds 1-5, 640x480). Against
+the truth where the rays land (true centres and depth), a lat-long map of the
+environment (16 x 32) seen along the two reflected paths, the front surface's (Fresnel
+``F``) and the one reflected once inside (``(1 - F)^2 F``), fitted by least squares to
+what the truth leaves unexplained, each totem's map from the other three, takes the
+rays' sRGB error from 0.074-0.098 to 0.052-0.078 and the view splatted at the true depth
+from 0.100 to 0.076 on average (0.079 -> 0.059, 0.092 -> 0.075, 0.119 -> 0.088, 0.102 ->
+0.060, 0.107 -> 0.099); the front path alone does less (seed 3: 0.097). Without the
+truth the map takes scene light: fitted to what the grid leaves unexplained, the view
+stayed as it was (seeds 1, 2, 3, 5: 0.065, 0.068, 0.122, 0.094) and the stereo's
+hold-out did not improve (seed 3: 0.099 -> 0.117); fitted to what the other totems' rays
+predict at the grid's depth, the view splatted there went 0.073 -> 0.068 and 0.124 ->
+0.113 on seeds 1 and 3, but the grid's own view, which the hold-out still prefers, stays
+0.065 and 0.120. (The same map in the loss, in log radiance, took scene light too: see
+above.)
 
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the
