@@ -86,6 +86,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from inverse.camera import project
 from inverse.grid import FrustumFrame
 from inverse.sweep import slice_colours
 from scenes.render import linear_to_srgb
@@ -129,17 +130,13 @@ def line_absence(o, d, colour, image, valid, K, *, step_px: float = STEP_PX,
     -------
     (m,) float64, sRGB units; NaN for a ray whose line has no valid pixel.
     """
-    o = np.asarray(o, np.float64)
-    d = np.asarray(d, np.float64)
     H, W = valid.shape
-    p0 = o @ K.T
-    p0 = p0[:, :2] / p0[:, 2:3]
-    p1 = d @ K.T
-    p1 = p1[:, :2] / p1[:, 2:3]
+    p0 = project(K, o)                    # the ray's start ...
+    p1 = project(K, d)                    # ... and its vanishing point (d_z > 0)
     target = chroma(colour)
     photo = chroma(image)
-    best = np.full(len(o), np.inf)
-    if not len(o):
+    best = np.full(len(p0), np.inf)
+    if not len(p0):
         return best
     n = int(min(max_samples, np.ceil(np.linalg.norm(p1 - p0, axis=1).max() / step_px))) + 1
     s = np.linspace(0.0, 1.0, n)
