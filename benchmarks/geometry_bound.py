@@ -29,7 +29,7 @@ import numpy as np
 def true_depth(desc: dict) -> np.ndarray:
     """Camera-frame z (metres) of the first surface along each pixel's ray, the
     scene rendered without totems; inf where the ray meets nothing."""
-    from inverse import backend
+    from scenes import backend
     from scenes import render
     backend.use()
     import drjit as dr
@@ -51,11 +51,11 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     the rays' brightness against the truth where they meet that surface (ratio of
     mean sRGB over the rays that meet it inside the image), and the view splatted the
     same way from the truth's colours at the pixels those rays meet."""
-    from inverse import backend, camera, sphere
+    from scenes import backend, camera, sphere
     from inverse.fit import _totem_pixels
     from inverse.grid import frame_for_scene
     from inverse.splat import _pixels, splat_image, surface_hits
-    from scenes.render import linear_to_srgb, srgb_to_linear
+    from scenes.colour import linear_to_srgb, srgb_to_linear
     backend.use()
     import mitsuba as mi
 

@@ -57,7 +57,7 @@ above.)
 The camera view (``FitSettings.stereo``, on by default): the grid's geometry is
 weakly determined (a far backdrop explains each totem ray on its own), so after the
 fit it is compared with plane-sweep stereo between the totems, and the one that
-predicts held-out totems better gives the view, pixel by pixel (:mod:`inverse.stereo`):
+predicts held-out totems better gives the view, pixel by pixel (:mod:`inverse.view`):
 where stereo wins, the view is splatted from the totem rays at its depth rather than
 rendered from the grid; ``fit.json``'s ``geometry`` says how much. (Starting the grid
 from the stereo depth instead was measured and dropped: the fit drifted from it, box
@@ -99,7 +99,7 @@ them out (2026-12-02, the whole standard set refitted at 640x480) moved box reco
 0.094 -> 0.093 (seed 4 0.137 -> 0.135), but on envmap seed 3 the grid's hold-out rose
 0.108 -> 0.114, stereo won it (ratio 0.85) and the view went 0.123 -> 0.190: envmap
 0.084 -> 0.098, and its untouched photo was called inconsistent. That choice is
-fragile there (see ``inverse.stereo.choose_view``'s margin): box seed 2 needs stereo at
+fragile there (see ``inverse.view.choose_view``'s margin): box seed 2 needs stereo at
 a ratio of 0.81, so no margin takes both.
 
 The colour grid is coarse in depth (``colour_depth`` slices): a column of the camera
@@ -118,10 +118,10 @@ from pathlib import Path
 
 import numpy as np
 
-from inverse import backend, camera
+from scenes import backend, camera
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from scenes import folder
-from scenes.render import linear_to_srgb, srgb_to_linear
+from scenes.colour import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
 
 FIT_FILES = ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
@@ -622,8 +622,8 @@ def exit_rays(itg, centers, radius, d_cam, jt, observed, refl, ambient) -> Totem
 
 
 def _stereo_view(rays: TotemRays, frame, density, grid_view, grid_points, size, settings):
-    """:func:`inverse.stereo.choose_view` on the totem rays at the final centres."""
-    from inverse.stereo import choose_view
+    """:func:`inverse.view.choose_view` on the totem rays at the final centres."""
+    from inverse.view import choose_view
 
     return choose_view(rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame,
                        column_depth(density, frame), grid_view, grid_points, size,

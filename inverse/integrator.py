@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import backend
+from scenes import backend
 
 backend.use()
 

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import backend, pose
+from inverse import pose
+from scenes import backend
 
 backend.use()
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import camera
+from scenes import camera
 from scenes.errors import BadInput
 
 METHODS = ("conic", "cone")

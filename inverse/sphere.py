@@ -14,7 +14,7 @@ Conventions (the same everywhere in this module):
 - ``eta = n_glass / n_air`` (> 1 for glass): Mitsuba's ``mi.fresnel`` convention,
   interior over exterior IoR, with the normal pointing to the exterior.
 - All arrays are Dr.Jit arrays of the active variant (call
-  ``inverse.backend.use()`` first), one lane per ray: ``mi.Point3f`` / ``mi.Vector3f``
+  ``scenes.backend.use()`` first), one lane per ray: ``mi.Point3f`` / ``mi.Vector3f``
   for points / directions, ``mi.Float`` (or Python floats, broadcast) for ``R``, ``eta``.
   ``P`` is the centre of the totem each ray is tested against (gathered per ray).
 
@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from inverse import backend
+from scenes import backend
 
 backend.use()
 

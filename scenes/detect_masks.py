@@ -192,7 +192,7 @@ def _cone_points(q, K, n: int = 180):
     silhouette is exactly this curve (an ellipse elongated away from the principal
     point), whatever the sphere's radius: three parameters instead of an ellipse's five.
     """
-    from inverse.camera import pixel_rays, project
+    from scenes.camera import pixel_rays, project
 
     u0, v0, s = q
     axis = pixel_rays(K, u0, v0)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import camera
+from scenes import camera
 from scenes.errors import BadInput
 
 PRESETS = ("box", "envmap")

@@ -50,7 +50,8 @@ import functools
 
 import numpy as np
 
-from inverse import backend, camera
+from scenes import backend, camera
+from scenes.colour import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
 
 NOTHING = -1
@@ -68,20 +69,6 @@ def sampler_type(spp: int) -> str:
 def totem_id(j: int) -> int:
     """The id :func:`shape_ids` gives totem ``j``."""
     return -(TOTEM_ID_BASE + j)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function (IEC 61966-2-1): linear [0, 1] -> sRGB [0, 1]."""
-    x = np.clip(np.nan_to_num(np.asarray(x, np.float32)), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x,
-                    1.055 * np.power(x, 1.0 / 2.4) - 0.055).astype(np.float32)
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`linear_to_srgb`."""
-    x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92,
-                    np.power((x + 0.055) / 1.055, 2.4)).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- textures

@@ -228,7 +228,7 @@ def _centroid(mask):
 def edit_shift(src: Source, rng) -> Edit:
     """The reference shift: an object (and its shadow) moved along the floor in the
     camera view and, by 2D translations, in each totem view that sees it."""
-    from inverse import camera
+    from scenes import camera
 
     desc = src.truth.scene
     rs = render_settings(desc)

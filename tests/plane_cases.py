@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import backend, camera
+from scenes import backend, camera
 
 backend.use()
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inverse.camera import pixel_rays
+from scenes.camera import pixel_rays
 from inverse.grid import frame_for_scene
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
-from scenes.render import srgb_to_linear
+from scenes.colour import srgb_to_linear
 from verify.corroborate import cell_errors, corroboration, unseen
 from verify.patches import chroma_distance
 

@@ -9,8 +9,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from inverse import backend, camera
-from scenes import render
+from scenes import backend, camera
+from scenes import colour, render
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from scenes.errors import BadInput
 
@@ -172,7 +172,7 @@ def test_camera_columns_through_mitsuba_render():
                           "sensor": camera.mitsuba_sensor(K, W, H, spp=4)})
     img = np.asarray(mi.render(scene, integrator=itg, spp=4))
     recon, depth = fit.render_view(itg, frame, (W, H), n=32)
-    lin = render.srgb_to_linear(recon)
+    lin = colour.srgb_to_linear(recon)
     # Pixel footprints differ (random sub-pixel positions), so compare means/edges.
     assert np.abs(img - lin).mean() < 0.02
     assert np.all((depth >= frame.near - 1e-4) & (depth <= frame.far + 1e-3))

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from inverse import camera
+from scenes import camera
 from scenes import folder
 from scenes.errors import BadInput
 

@@ -3,7 +3,8 @@ and descent from a perturbed centre."""
 
 import numpy as np
 
-from inverse import camera, outline, pose
+from inverse import outline, pose
+from scenes import camera
 
 import drjit as dr  # after inverse.outline, which calls backend.use()
 import mitsuba as mi

@@ -8,7 +8,8 @@ by the ray/sphere discriminant here and by Mitsuba's own sphere in one test.
 import numpy as np
 import pytest
 
-from inverse import camera, pose
+from inverse import pose
+from scenes import camera
 from scenes.errors import BadInput
 
 W, H = 320, 240
@@ -114,7 +115,7 @@ def test_outline_rays_are_tangent_to_the_sphere():
 
 def test_mitsuba_sphere_mask():
     """Mask from Mitsuba's own ray/sphere intersection of the contract's pixel rays."""
-    from inverse import backend
+    from scenes import backend
     backend.use()
     import mitsuba as mi
 

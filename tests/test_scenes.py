@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from inverse import backend, camera
-from scenes import folder, make, presets, render
+from scenes import backend, camera
+from scenes import colour, folder, make, presets, render
 from scenes.errors import BadInput
 
 W, H = 160, 120
@@ -50,7 +50,7 @@ def test_rendered_edges_land_where_K_projects_them():
     L = 0.8
     desc = _light_desc(K, (W, H), [{"id": 0, "name": "l", "kind": "rectangle",
                                     "to_world": to_world.tolist(), "radiance": [L] * 3}])
-    img = render.srgb_to_linear(render.render(desc, spp=256)).mean(-1) / L
+    img = colour.srgb_to_linear(render.render(desc, spp=256)).mean(-1) / L
     rows = img[int(v_e) + 3:]                 # rows wholly below the horizontal edge
     cols = img[:, int(u_e) + 3:]              # columns wholly right of the vertical edge
     u_meas = W - 0.5 - rows.sum(1).mean()

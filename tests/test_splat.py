@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse import camera
+from scenes import camera
 from inverse.grid import frame_for_scene
 from inverse.splat import holdout_error, splat_image, surface_hits
-from inverse.stereo import choose_view, stereo_weight
+from inverse.view import choose_view, stereo_weight
 from inverse.sweep import slice_depths
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 
@@ -82,7 +82,7 @@ def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
     X = camera.pixel_rays(K, uu.ravel(), vv.ravel())
     X = X / X[:, 2:3] * z_plane
     truth = texture(X[:, 0], X[:, 1])
-    from scenes.render import linear_to_srgb
+    from scenes.colour import linear_to_srgb
     got = view.recon[rows, cols].reshape(-1, 3)
     expect = linear_to_srgb(np.clip(truth ** 2.2, 0, 1))
     spread = np.abs(expect - expect.mean(0)).mean()
@@ -99,7 +99,7 @@ def test_each_pixel_takes_the_geometry_whose_held_out_rays_erred_less_nearby():
     z_plane = 3.0
     o, d, js, col = rays_onto_plane(z_plane)
     lin = col ** 2.2
-    from scenes.render import linear_to_srgb
+    from scenes.colour import linear_to_srgb
     vv, uu = np.mgrid[0:H, 0:W]
     X = camera.pixel_rays(K, uu.ravel(), vv.ravel())
     truth = linear_to_srgb(np.clip(texture(*(X[:, :2] / X[:, 2:3] * z_plane).T) ** 2.2, 0, 1))

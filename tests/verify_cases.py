@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from inverse.camera import intrinsics, pixel_rays
+from scenes.camera import intrinsics, pixel_rays
 from scenes import folder
 
 W, H = 320, 240

@@ -86,10 +86,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from inverse.camera import project
+from scenes.camera import project
 from inverse.grid import FrustumFrame
 from inverse.sweep import slice_colours
-from scenes.render import linear_to_srgb
+from scenes.colour import linear_to_srgb
 from verify import corroborate
 from verify.patches import chroma
 

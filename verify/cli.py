@@ -345,7 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Entry point of the ``totems`` console script; returns the exit code."""
-    from inverse.backend import BackendError
+    from scenes.backend import BackendError
     from scenes.errors import BadInput
 
     args = build_parser().parse_args(argv)

@@ -55,7 +55,7 @@ from scipy import ndimage
 
 from inverse.grid import FrustumFrame
 from inverse.sweep import slice_colours
-from scenes.render import linear_to_srgb
+from scenes.colour import linear_to_srgb
 from verify.patches import chroma
 
 CELL_PX = 5.2

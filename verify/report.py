@@ -97,7 +97,7 @@ def sphere_silhouette(center: np.ndarray, radius: float, K: np.ndarray,
     A pixel is inside when its ray makes an angle < asin(R / |P|) with the direction
     of the centre P (camera frame, metres); the whole image when the camera is inside.
     """
-    from inverse.camera import pixel_rays
+    from scenes.camera import pixel_rays
 
     H, W = shape
     P = np.asarray(center, dtype=np.float64)

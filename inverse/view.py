@@ -28,11 +28,11 @@ import numpy as np
 
 from scipy import ndimage
 
-from inverse.camera import pixel_rays, project
+from scenes.camera import pixel_rays, project
 from inverse.grid import FrustumFrame
 from inverse.splat import error_map, holdout_errors, splat_image
 from inverse.sweep import plane_sweep, slice_colours
-from scenes.render import linear_to_srgb
+from scenes.colour import linear_to_srgb
 
 
 def _display(x):
