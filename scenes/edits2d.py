@@ -4,6 +4,8 @@ Every function takes 8-bit sRGB images (H, W, 3) uint8 and returns a new uint8 i
 with the bool footprint of what it touched, so that pixels outside the footprint are the
 input's bit for bit (the manipulation mask of a tampered scene is that footprint).
 Colours are never linearised: a forger's tools work on the 8-bit sRGB values.
+:func:`bbox`, :func:`dilate` and :func:`shift_mask` work on selections ((H, W) bool):
+the one place where a mask's bounding box, or its growth by a radius, is computed.
 
 References
 ----------
@@ -20,6 +22,10 @@ import cv2
 import numpy as np
 from scipy import ndimage as ndi
 
+__all__ = ["INPAINT_METHODS", "astronaut_cutout", "bbox", "clone_fill", "composite",
+           "dilate", "feathered_alpha", "inpaint", "move_pixels", "paste_patches",
+           "scaled_cutout", "shift_mask", "splice"]
+
 INPAINT_METHODS = {"telea": cv2.INPAINT_TELEA, "ns": cv2.INPAINT_NS}
 
 
@@ -30,6 +36,32 @@ def _check_image(image: np.ndarray) -> np.ndarray:
                          f"{image.shape}")
     return image
 
+
+# --------------------------------------------------------------------------- selections
+
+def bbox(mask) -> tuple[int, int, int, int]:
+    """The bounding box ``(x, y, w, h)`` of the True pixels of an (H, W) bool mask, in
+    pixels (column, row of the top-left corner, width, height).
+
+    Raises ValueError for a mask with no True pixel.
+    """
+    ys, xs = np.nonzero(np.asarray(mask))
+    if ys.size == 0:
+        raise ValueError("the bounding box of an empty mask")
+    return int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), \
+        int(ys.max() - ys.min() + 1)
+
+
+def dilate(mask, r: int):
+    """``mask`` grown by ``r`` pixels with a disc (an editor's "expand selection");
+    a copy of it for ``r <= 0``."""
+    if r <= 0:
+        return mask.copy()
+    y, x = np.ogrid[-r:r + 1, -r:r + 1]
+    return ndi.binary_dilation(mask, structure=(x * x + y * y) <= r * r)
+
+
+# --------------------------------------------------------------------------- edits
 
 def paste_patches(image, boxes, colors, *, keep=None):
     """Paste flat-coloured rectangles.
@@ -137,15 +169,15 @@ def clone_fill(image, mask, *, avoid=None, feather_px: float = 3.0):
         return smooth, mask.copy(), None
     ring = ndi.binary_dilation(mask, iterations=3) & ~bad
     ys, xs = np.nonzero(mask)
-    w = xs.max() - xs.min() + 1
+    x0, y0, w, h = bbox(mask)
     offsets = [(s * (w + k), 0) for s in (-1, 1)
                for k in (2, 6, 12, 24, 48, w // 2, w, 2 * w)]
     best, best_cost = None, np.inf
     ry, rx = np.nonzero(ring)
     for dx, dy in offsets:
+        if x0 + dx < 0 or y0 + dy < 0 or x0 + w + dx > W or y0 + h + dy > H:
+            continue                           # the copied pixels leave the image
         sy, sx = ys + dy, xs + dx
-        if sy.min() < 0 or sx.min() < 0 or sy.max() >= H or sx.max() >= W:
-            continue
         if bad[sy, sx].mean() > 0.15:          # mostly allowed pixels to copy
             continue
         ok = (ry + dy >= 0) & (ry + dy < H) & (rx + dx >= 0) & (rx + dx < W)
@@ -271,9 +303,8 @@ def astronaut_cutout():
     m = ndi.binary_fill_holes(m)
     # Full-resolution matte, cropped to the person's bounding box.
     M = cv2.resize(m.astype(np.uint8), full.shape[1::-1], interpolation=cv2.INTER_LINEAR) > 0
-    ys, xs = np.nonzero(M)
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    return full[y0:y1, x0:x1].copy(), M[y0:y1, x0:x1].copy()
+    x0, y0, w, h = bbox(M)
+    return full[y0:y0 + h, x0:x0 + w].copy(), M[y0:y0 + h, x0:x0 + w].copy()
 
 
 def scaled_cutout(rgb, matte, height_px: int, *, flip: bool = False):

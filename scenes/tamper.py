@@ -26,49 +26,32 @@ and drawn in ``truth/tamper_totem_mask.png``.
 
 Images are handled as the 8-bit sRGB values of the file, so pixels outside the mask
 are the source's bit for bit.
+
+This module holds the verb (:func:`tamper`, :func:`parse_region`, the table of kinds,
+the writing of the copy) and the 2D editors. The re-rendering editors are in
+:mod:`scenes.tamper3d`, loaded (with Mitsuba) only for those kinds; what both share
+(:class:`~scenes.edits.Edit`, :class:`~scenes.edits.Source`, the target zone, the
+choice of an object) is in :mod:`scenes.edits`, the pixel tools in :mod:`scenes.edits2d`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from scenes import edits2d, folder
+from scenes.edits import Edit, Source, pick_object, target_zone
 from scenes.errors import BadInput
+
+__all__ = ["FORMAT", "KINDS", "NEEDS_TRUTH", "edit_color", "edit_inpaint", "edit_splice",
+           "parse_region", "tamper"]
 
 KINDS = ("color", "splice", "inpaint", "shift", "remove", "insert")
 NEEDS_TRUTH = ("shift", "remove", "insert")
 FORMAT = 1
-
-
-@dataclass
-class Edit:
-    """What an editor did: the new 8-bit image, the changed camera pixels, a record."""
-
-    image: np.ndarray                       # (H, W, 3) uint8 sRGB
-    mask: np.ndarray                        # (H, W) bool, changed camera-view pixels
-    record: dict = field(default_factory=dict)
-    totem_mask: np.ndarray | None = None    # (H, W) bool, edited totem pixels (shift)
-
-
-@dataclass
-class Source:
-    """The scene being forged, as the editors see it."""
-
-    path: Path
-    image: np.ndarray           # (H, W, 3) uint8 sRGB, the file's values
-    scene: folder.Scene
-    truth: folder.Truth | None
-    totems: np.ndarray          # (H, W) bool, union of the totem masks
-    region: np.ndarray | None   # (H, W) bool, where the user asked for the edit
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return self.image.shape[:2]
 
 
 # --------------------------------------------------------------------------- public
@@ -78,7 +61,7 @@ def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
 
     Parameters
     ----------
-    scene_dir : a scene folder (``shared/CONTRACT.md``).
+    scene_dir : a scene folder (``docs/contract.md``).
     out : the new folder; must not exist (or be empty).
     kind : one of :data:`KINDS`.
     seed : random seed; the same seed gives the same forgery, bit for bit.
@@ -164,39 +147,13 @@ def parse_region(region, shape, totems=None) -> np.ndarray | None:
     return mask
 
 
-# --------------------------------------------------------------------------- where
-
-def target_zone(totems: np.ndarray) -> np.ndarray:
-    """Where a forger edits when not told: the middle of the image above the totems.
-
-    The totems protect the part of the scene they see, which is what lies above them
-    in the picture (the paper's patch grid is also laid above the totems).
-    Returns (H, W) bool.
-    """
-    H, W = totems.shape
-    rows = np.nonzero(totems.any(axis=1))[0]
-    top = rows.min() if rows.size else H
-    y0, y1 = int(0.08 * H), int(top - 0.02 * H)
-    if y1 - y0 < 0.2 * H:                         # totems high up: use the whole middle
-        y0, y1 = int(0.1 * H), int(0.9 * H)
-    zone = np.zeros((H, W), bool)
-    zone[y0:y1, int(0.15 * W):int(0.85 * W)] = True
-    return zone & ~totems
-
-
-def _bbox(mask: np.ndarray) -> tuple[int, int, int, int]:
-    ys, xs = np.nonzero(mask)
-    return int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), \
-        int(ys.max() - ys.min() + 1)
-
-
 # --------------------------------------------------------------------------- 2D kinds
 
 def edit_color(src: Source, rng) -> Edit:
     """Randomly coloured rectangles, two to four, of several sizes (paper Sec. 5)."""
     H, W = src.shape
     area = src.region if src.region is not None else target_zone(src.totems)
-    x0, y0, w0, h0 = _bbox(area)
+    x0, y0, w0, h0 = edits2d.bbox(area)
     n = int(rng.integers(2, 5))
     # Sides of 5-14% of the image's scale (each patch 0.25-2% of it), or 20-50% of
     # a region's.
@@ -228,7 +185,7 @@ def edit_splice(src: Source, rng) -> Edit:
     flip = bool(rng.integers(0, 2))
     aspect = matte.shape[1] / matte.shape[0]
     if src.region is not None:
-        x0, y0, w0, h0 = _bbox(src.region)
+        x0, y0, w0, h0 = edits2d.bbox(src.region)
         h = int(min(h0, w0 / aspect))
         small, cover = edits2d.scaled_cutout(rgb, matte, h, flip=flip)
         x = x0 + int(rng.integers(0, max(w0 - small.shape[1], 0) + 1))
@@ -236,7 +193,7 @@ def edit_splice(src: Source, rng) -> Edit:
         area = src.region
     else:
         zone = target_zone(src.totems)
-        x0, y0, w0, h0 = _bbox(zone)
+        x0, y0, w0, h0 = edits2d.bbox(zone)
         h = int(min(rng.uniform(0.28, 0.38) * H, h0, w0 / aspect))
         small, cover = edits2d.scaled_cutout(rgb, matte, h, flip=flip)
         x = x0 + int(rng.integers(0, max(w0 - small.shape[1], 0) + 1))
@@ -265,12 +222,12 @@ def edit_inpaint(src: Source, rng) -> Edit:
     elif src.truth is not None and src.truth.scene.get("objects"):
         from scenes import render
         ids = render.shape_ids(src.truth.scene, totems=True)
-        obj, footprint = _pick_object(src, rng, ids=ids)
+        obj, footprint = pick_object(src, rng, ids=ids)
         grow = max(1, round(0.004 * W))
-        fill = _dilate(footprint, grow) & ~src.totems
+        fill = edits2d.dilate(footprint, grow) & ~src.totems
         # texture is copied from the room, not from the other objects
         movable = [o["id"] for o in src.truth.scene["objects"] if o.get("removable")]
-        avoid = avoid | _dilate(np.isin(ids, movable), grow)
+        avoid = avoid | edits2d.dilate(np.isin(ids, movable), grow)
         record["object"] = {"id": obj["id"], "name": obj.get("name")}
     else:
         raise BadInput("inpaint on a photo without truth/scene.json needs --region "
@@ -284,52 +241,9 @@ def edit_inpaint(src: Source, rng) -> Edit:
 
 # --------------------------------------------------------------------------- helpers
 
-def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
-    from scipy import ndimage as ndi
-
-    if r <= 0:
-        return mask.copy()
-    y, x = np.ogrid[-r:r + 1, -r:r + 1]
-    return ndi.binary_dilation(mask, structure=(x * x + y * y) <= r * r)
-
-
 def _read_uint8(path: Path) -> np.ndarray:
     """The 8-bit sRGB values of ``path`` exactly (read_image gives k / 255)."""
     return np.rint(folder.read_image(path, what="photo") * 255.0).astype(np.uint8)
-
-
-def _pick_object(src: Source, rng, *, ids=None):
-    """A removable object of the scene visible in the camera view (not through a
-    totem), preferring the region, else one seen above the totems.
-
-    Returns (object dict, (H, W) bool of its directly seen pixels).
-    """
-    from scenes import render
-
-    desc = src.truth.scene
-    if ids is None:
-        ids = render.shape_ids(desc, totems=True)
-    want = src.region if src.region is not None else target_zone(src.totems)
-    H, W = src.shape
-    cands, weights = [], []
-    for obj in desc["objects"]:
-        if not obj.get("removable"):
-            continue
-        seen = ids == obj["id"]
-        n_seen, n_want = int(seen.sum()), int((seen & want).sum())
-        if n_seen >= max(20, 5e-4 * H * W) and n_want > 0:
-            cands.append(obj)
-            weights.append(n_want)
-    if not cands:
-        raise BadInput("no removable object of the scene is visible "
-                       + ("in the region" if src.region is not None else
-                          "above the totems") + "; try another scene or region")
-    if src.region is not None:
-        obj = cands[int(np.argmax(weights))]
-    else:   # a clearly visible one: at least a quarter the size of the largest
-        big = [o for o, w in zip(cands, weights) if w >= 0.25 * max(weights)]
-        obj = big[int(rng.integers(0, len(big)))]
-    return obj, ids == obj["id"]
 
 
 # --------------------------------------------------------------------------- writing
@@ -370,7 +284,7 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
                              (src.path / "image.png").read_bytes()).hexdigest()},
               "changed_pixels": int(mask.sum()),
               "changed_fraction": round(float(mask.sum()) / (H * W), 6),
-              "bbox": list(_bbox(mask)),
+              "bbox": list(edits2d.bbox(mask)),
               "totems_edited": edit.totem_mask is not None}
     if edit.totem_mask is not None:
         record["totem_mask"] = "truth/tamper_totem_mask.png"

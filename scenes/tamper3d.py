@@ -13,6 +13,10 @@ edited by translation only, which is where the geometry gives it away.
 
 Renders are sRGB quantised to 8 bits exactly as ``folder.write_image`` does, so a
 render that matches the source reproduces its pixel values.
+
+The editors are called by :func:`scenes.tamper.tamper`; this module imports only what
+they share (:mod:`scenes.edits`) and the pixel tools (:mod:`scenes.edits2d`), never
+:mod:`scenes.tamper`. Mitsuba (:mod:`scenes.render`) is imported inside the functions.
 """
 
 from __future__ import annotations
@@ -23,8 +27,11 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from scenes import edits2d
+from scenes.edits import Edit, Source, pick_object, target_zone
 from scenes.errors import BadInput
-from scenes.tamper import Edit, Source, _dilate, _pick_object, target_zone
+
+__all__ = ["STRONG_DIFF", "VISIBLE_DIFF", "edit_insert", "edit_remove", "edit_shift",
+           "floor_plane", "new_object", "render8", "render_settings", "visible_change"]
 
 VISIBLE_DIFF = 6.0      # 8-bit levels, after a 3x3 mean: a change one can see
 STRONG_DIFF = 16.0      # 8-bit levels in one pixel: a change whatever its size
@@ -91,7 +98,7 @@ def _rerender_edit(src: Source, new_desc: dict, exclude_ids, footprint, record) 
 
 def edit_remove(src: Source, rng) -> Edit:
     """A removable object rendered away (the perfect content-aware fill)."""
-    obj, seen = _pick_object(src, rng)
+    obj, seen = pick_object(src, rng)
     return _rerender_edit(src, src.truth.scene, [obj["id"]], seen,
                           {"object": {"id": obj["id"], "name": obj.get("name")}})
 
@@ -175,7 +182,7 @@ def edit_insert(src: Source, rng) -> Edit:
     along = a1 / np.linalg.norm(a1)
     others = [_footprint_radius(o) for o in desc["objects"] if o.get("removable")]
     zone = target_zone(src.totems)
-    x0, y0, w0, h0 = (int(v) for v in _zone_box(zone))
+    x0, y0, w0, h0 = edits2d.bbox(zone)
     new_id = 1 + max([int(o["id"]) for o in desc["objects"]]
                      + [int(li["id"]) for li in desc.get("lights", [])])
     for _ in range(60):
@@ -201,11 +208,6 @@ def edit_insert(src: Source, rng) -> Edit:
                                   {"object": obj})
     raise BadInput("could not place a new object on the floor in view above the "
                    "totems; try another seed")
-
-
-def _zone_box(zone):
-    ys, xs = np.nonzero(zone)
-    return xs.min(), ys.min(), xs.max() - xs.min() + 1, ys.max() - ys.min() + 1
 
 
 # --------------------------------------------------------------------------- shift
@@ -236,7 +238,7 @@ def edit_shift(src: Source, rng) -> Edit:
     H, W = src.shape
     p0, up, Mf = floor_plane(desc)
     along = Mf[:3, 0] / np.linalg.norm(Mf[:3, 0])
-    obj, seen = _pick_object(src, rng)
+    obj, seen = pick_object(src, rng)
     centre, foot = _footprint_radius(obj)
     others = [_footprint_radius(o) for o in desc["objects"]
               if o.get("removable") and o["id"] != obj["id"]]
