@@ -7,9 +7,10 @@ For each untouched scene of SET with ground truth, and its ``joint`` run in BENC
 (``totems bench``), prints the recon L1 of the run and of the true-depth splat, both
 over the run's protected region (totem pixels excluded): the first minus the second is
 what the fit's geometry costs; the second is what the totems' sampling allows with
-this simple splat (pull-push between the rays). The third column is how bright the totem
-rays are against the truth where they meet the surface the camera sees (mean sRGB of
-the rays over the truth's there, the glass's reflection taken off as the fit starts):
+this simple splat (:func:`inverse.splat.splat_image`, linear between the rays'
+pixels). The third column is how bright the totem rays are against the truth where
+they meet the surface the camera sees (mean sRGB of the rays over the truth's there,
+the glass's reflection taken off as the fit starts):
 above 1, the rays carry light the model does not take off, and any view splatted or
 fitted from them is that much too bright. The fourth is the same splat of the truth's
 own colours where the rays land: what the totems' sampling alone allows, were the
@@ -29,11 +30,9 @@ import numpy as np
 def true_depth(desc: dict) -> np.ndarray:
     """Camera-frame z (metres) of the first surface along each pixel's ray, the
     scene rendered without totems; inf where the ray meets nothing."""
-    from scenes import backend
-    from scenes import render
-    backend.use()
-    import drjit as dr
-    import mitsuba as mi
+    from scenes import backend, render
+
+    dr, mi = backend.modules()
 
     W, H = (int(s) for s in desc["size"])
     scene = mi.load_dict(render.scene_dict(desc, spp=1, totems=False)[0])
@@ -51,13 +50,14 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     the rays' brightness against the truth where they meet that surface (ratio of
     mean sRGB over the rays that meet it inside the image), and the view splatted the
     same way from the truth's colours at the pixels those rays meet."""
-    from scenes import backend, camera, sphere
-    from inverse.fit import _totem_pixels
+    from inverse import sphere
+    from inverse.rays import totem_pixels
     from inverse.grid import frame_for_scene
     from inverse.splat import _pixels, splat_image, surface_hits
+    from scenes import backend
     from scenes.colour import linear_to_srgb, srgb_to_linear
-    backend.use()
-    import mitsuba as mi
+
+    mi = backend.modules()[1]
 
     W, H = scene.size
     K = np.asarray(scene.K, np.float64)
@@ -65,8 +65,8 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     P = np.asarray(truth.totem_pose, np.float64)
     radius = np.broadcast_to(np.asarray(scene.radius, np.float64), (n,))
     ior = np.broadcast_to(np.asarray(scene.ior, np.float64), (n,))
-    u, v, jt = _totem_pixels(scene.masks, 1)
-    d = camera.pixel_rays(K, u, v).astype(np.float32)
+    pixels = totem_pixels(scene, K, 1)
+    u, v, jt, d = pixels.u, pixels.v, pixels.totem, pixels.d_cam
     f32 = lambda a: mi.Float(np.asarray(a, np.float32))  # noqa: E731
     path = sphere.totem_path(mi.Point3f(0.0), mi.Vector3f(*[f32(d[:, i]) for i in range(3)]),
                              mi.Point3f(*[f32(P[jt, i]) for i in range(3)]),

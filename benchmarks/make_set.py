@@ -1,73 +1,244 @@
-"""Build the standard benchmark set: both presets, several seeds, every manipulation.
+"""Build a set of scene folders: a named set (``benchmarks/sets.py``) or the standard set.
 
-    python benchmarks/make_set.py OUT [--small] [--seeds N] [--first-seed S] [--totems-study]
+    python benchmarks/make_set.py OUT --set development|calibration|benchmark
+        [--jobs N] [--dry-run] [--small] [--presets P,..] [--kinds K,..] [--channels C,..]
+    python benchmarks/make_set.py OUT [--small] [--seeds N] [--first-seed S]
+        [--totems-study] [--presets box,envmap] [--kinds K,..] [--jobs N] [--dry-run]
 
-Layout: OUT/<preset>-<seed>/ (untouched) and OUT/<preset>-<seed>-<kind>/ (manipulated).
---small: 2 seeds at 320x240, for a quick run. --totems-study: also box scenes with 2 and
-6 totems (the supplementary's study of the number of totems). Existing folders are kept,
-so an interrupted build resumes. The held-out set the verdict's thresholds are calibrated
-on (``benchmarks/thresholds.py``): ``--first-seed 11 --seeds 8 --kinds ""``.
+Layout: OUT/<preset>-<seed>/ (untouched), OUT/<preset>-<seed>-<kind>/ (manipulated),
+OUT/<name>+<channel>/ (recaptured through ``scenes.recapture``), OUT/<preset>-<seed>-
+<n>totems/ (the totems study). Without ``--set``, the standard set: box and envmap
+seeds 1-5 (``--seeds``, ``--first-seed``), untouched and every manipulation, pristine.
+--small: 320x240 and the first 2 seeds of each preset, for a quick run.
+--totems-study: also box scenes with 2 and 6 totems (the supplementary's study).
+--presets, --kinds, --channels keep only those (``--kinds ""``: untouched photos only).
+Existing folders are kept (each is written under a temporary name and renamed when
+complete), so an interrupted build resumes. --jobs N: the scenes are made, then
+tampered, then recaptured, N at a time in separate processes (renders are
+deterministic per seed, so the order does not matter). --dry-run: what is left to
+make and how long it would take here (``SECONDS``).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import sets
 
 from scenes.errors import BadInput
 from scenes.make import make_scene
 from scenes.tamper import KINDS, tamper
 
+# Seconds per task at 640x480, 64 spp, on this machine's 2 cores: seed 1 of each preset
+# made and edited beside a benchmark run (make: box 51 s, envmap 19, outdoor 19,
+# window 86, tabletop 33), divided by 1.83, the factor that brings the standard set's
+# tasks so timed to the 13 min its build took alone (README, 2026-12). At 320x240 a
+# make takes about a third. A re-rendering edit takes RENDER_FACTOR times its preset's
+# make (measured on the same scenes: remove 0.85-1.0, insert 0.8-1.1, shift 1.2-2.0).
+SECONDS = {"make": {"box": 28.0, "envmap": 10.2, "outdoor": 10.6, "window": 47.0,
+                    "tabletop": 18.3},
+           "tamper": {"color": 0.2, "splice": 0.5, "inpaint": 0.5},
+           "recapture": 0.2}
+RENDER_FACTOR = {"remove": 0.93, "insert": 0.97, "shift": 1.5}
+PARALLEL_GAIN = 1.2          # 2 jobs on 2 cores against 1: renders already use both
 
-def build(out: Path, *, presets, seeds, size, kinds, totem_counts, spp=None) -> list[Path]:
-    made = []
-    for preset in presets:
-        for seed in seeds:
-            for n in totem_counts:
-                name = f"{preset}-{seed}" + ("" if n == 4 else f"-{n}totems")
-                base = out / name
-                if not base.exists():
-                    t0 = time.perf_counter()
-                    kw = {} if spp is None else {"spp": spp}
-                    make_scene(base, preset=preset, seed=seed, size=size, n_totems=n, **kw)
-                    print(f"made {name} in {time.perf_counter() - t0:.0f} s", flush=True)
-                made.append(base)
-                if n != 4:
-                    continue
-                for kind in kinds:
-                    dst = out / f"{name}-{kind}"
-                    if not dst.exists():
-                        try:
-                            tamper(base, dst, kind=kind, seed=seed)
-                        except BadInput as e:   # e.g. no object fit to remove: skip it
-                            print(f"skipped {dst.name}: {e}", flush=True)
-                            continue
-                        print(f"tampered {dst.name}", flush=True)
-                    made.append(dst)
-    return made
+
+# --------------------------------------------------------------------------- what
+
+def standard_photos(presets, seeds, kinds, totem_study: bool) -> list:
+    """The standard set's photos (module docstring), as ``sets.Photo``."""
+    out = [sets.Photo(p, s, k) for p in presets for s in seeds
+           for k in (sets.UNTOUCHED,) + tuple(kinds)]
+    if totem_study:
+        out += [sets.Photo(p, s, n_totems=n) for p in presets for s in seeds
+                for n in (2, 6)]
+    return out
+
+
+def select(photos, *, presets=None, kinds=None, channels=None, first=None) -> list:
+    """The photos of the given presets, manipulations (the untouched ones always) and
+    channels, and of each preset's ``first`` seeds only."""
+    keep = []
+    for p in photos:
+        if presets is not None and p.preset not in presets:
+            continue
+        if kinds is not None and p.kind not in (sets.UNTOUCHED,) + tuple(kinds):
+            continue
+        if channels is not None and p.channel not in channels:
+            continue
+        keep.append(p)
+    if first is not None:
+        seeds = {pr: sorted({p.seed for p in keep if p.preset == pr})[:first]
+                 for pr in {p.preset for p in keep}}
+        keep = [p for p in keep if p.seed in seeds[p.preset]]
+    return keep
+
+
+def tasks(photos, out: Path) -> dict:
+    """The three stages' tasks not done yet, ``{"make"|"tamper"|"recapture": [Photo]}``
+    (one per folder to write; a photo whose folder exists is done)."""
+    todo = {"make": {}, "tamper": {}, "recapture": {}}
+    for p in photos:
+        base = sets.Photo(p.preset, p.seed, n_totems=p.n_totems)
+        if not (out / base.scene).exists():
+            todo["make"][base.scene] = base
+        src = sets.Photo(p.preset, p.seed, p.kind, n_totems=p.n_totems)
+        if p.kind != sets.UNTOUCHED and not (out / src.source).exists():
+            todo["tamper"][src.source] = src
+        if p.channel != "pristine" and not (out / p.name).exists():
+            todo["recapture"][p.name] = p
+    return {stage: list(v.values()) for stage, v in todo.items()}
+
+
+def estimate_s(todo: dict, *, size, jobs: int) -> float:
+    """Seconds the tasks would take here (``SECONDS``), with ``jobs`` processes."""
+    scale = size[0] * size[1] / (640 * 480)
+    scale = max(scale, 1 / 3)            # fixed costs (scene loading, masks) remain
+    total = 0.0
+    for p in todo["make"]:
+        total += SECONDS["make"][p.preset] * scale
+    for p in todo["tamper"]:
+        if p.kind in RENDER_FACTOR:
+            total += RENDER_FACTOR[p.kind] * SECONDS["make"][p.preset] * scale
+        else:
+            total += SECONDS["tamper"].get(p.kind, 1.0)
+    total += SECONDS["recapture"] * len(todo["recapture"])
+    return total / (PARALLEL_GAIN if jobs > 1 else 1.0)
+
+
+# --------------------------------------------------------------------------- doing
+
+def make_one(out: str, photo, size, spp) -> str:
+    """Make the untouched scene of ``photo``; returns a line for the log."""
+    t0 = time.perf_counter()
+    kw = {} if spp is None else {"spp": spp}
+    make_scene(Path(out) / photo.scene, preset=photo.preset, seed=photo.seed, size=size,
+               n_totems=photo.n_totems, **kw)
+    return f"made {photo.scene} in {time.perf_counter() - t0:.0f} s"
+
+
+def tamper_one(out: str, photo) -> str:
+    """Write the manipulated copy ``photo.source`` of its scene (seed: the scene's)."""
+    t0 = time.perf_counter()
+    try:
+        tamper(Path(out) / photo.scene, Path(out) / photo.source, kind=photo.kind,
+               seed=photo.seed)
+    except BadInput as e:               # e.g. no object fit to remove: skip it
+        return f"skipped {photo.source}: {e}"
+    return f"tampered {photo.source} in {time.perf_counter() - t0:.0f} s"
+
+
+def recapture_one(out: str, photo) -> str:
+    """Write ``photo.name``: its pristine source through the channel."""
+    src = Path(out) / photo.source
+    if not src.exists():
+        return f"skipped {photo.name}: no {photo.source}"
+    recapture(src, Path(out) / photo.name, photo.channel, seed=photo.seed)
+    return f"recaptured {photo.name}"
+
+
+def recapture(src: Path, dst: Path, channel: str, *, seed: int) -> None:
+    """The hook to ``scenes.recapture``: ``src`` through the channel named ``channel``
+    (``sets.CHANNELS``), its noise seeded by ``seed``, written at ``dst``."""
+    from scenes.channel import Channel
+    from scenes.recapture import recapture as run
+
+    run(src, dst, Channel(**sets.CHANNELS[channel], seed=int(seed)))
+
+
+def _init_worker(threads: int) -> None:
+    os.environ.setdefault("TOTEMS_THREADS", str(threads))
+
+
+def run_stage(calls, jobs: int) -> None:
+    """Run ``calls`` ([(function, args)]), ``jobs`` at a time, printing their lines."""
+    if jobs <= 1 or len(calls) <= 1:
+        for fn, args in calls:
+            print(fn(*args), flush=True)
+        return
+    threads = max(1, (os.cpu_count() or 1) // jobs)
+    with ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
+                             initializer=_init_worker, initargs=(threads,)) as pool:
+        for fut in as_completed([pool.submit(fn, *args) for fn, args in calls]):
+            print(fut.result(), flush=True)
+
+
+def build(out: Path, photos, *, size, jobs: int = 1, spp=None) -> list[Path]:
+    """Make, tamper and recapture what ``photos`` needs under ``out``; returns the
+    photos' folders that exist afterwards."""
+    out.mkdir(parents=True, exist_ok=True)
+    todo = tasks(photos, out)
+    run_stage([(make_one, (str(out), p, size, spp)) for p in todo["make"]], jobs)
+    run_stage([(tamper_one, (str(out), p)) for p in todo["tamper"]], jobs)
+    run_stage([(recapture_one, (str(out), p)) for p in todo["recapture"]], jobs)
+    return [out / p.name for p in photos if (out / p.name).exists()]
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("out", type=Path)
+    p.add_argument("--set", choices=sets.SETS, default=None,
+                   help="a named set of benchmarks/sets.py (default: the standard set)")
     p.add_argument("--small", action="store_true", help="2 seeds at 320x240")
     p.add_argument("--seeds", type=int, default=None, help="seeds per preset (default 5)")
-    p.add_argument("--first-seed", type=int, default=1,
+    p.add_argument("--first-seed", type=int, default=None,
                    help="first seed (default 1; the held-out calibration set uses 11)")
     p.add_argument("--totems-study", action="store_true")
-    p.add_argument("--presets", default="box,envmap")
-    p.add_argument("--kinds", default=",".join(KINDS))
+    p.add_argument("--presets", default=None, help="default: box,envmap; a set's: all")
+    p.add_argument("--kinds", default=None, help="manipulations (default: all)")
+    p.add_argument("--channels", default=None, help="channels (default: the set's)")
+    p.add_argument("--jobs", type=int, default=1, help="processes at a time (default 1)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print what is left to make and how long it would take here")
     args = p.parse_args(argv)
-    n_seeds = args.seeds or (2 if args.small else 5)
-    seeds = range(args.first_seed, args.first_seed + n_seeds)
     size = (320, 240) if args.small else (640, 480)
-    counts = (2, 4, 6) if args.totems_study else (4,)
-    made = build(args.out, presets=args.presets.split(","), seeds=seeds, size=size,
-                 kinds=[k for k in args.kinds.split(",") if k], totem_counts=counts)
+    photos = _photos(p, args)
+    todo = tasks(photos, args.out)
+    counts = ", ".join(f"{len(v)} to {k}" for k, v in todo.items())
+    est = estimate_s(todo, size=size, jobs=args.jobs)
+    print(f"{len(photos)} photos ({args.set or 'standard set'}, {size[0]}x{size[1]}): "
+          f"{counts}; about {est / 60:.0f} min here with --jobs {args.jobs}", flush=True)
+    if args.dry_run:
+        return 0
+    made = build(args.out, photos, size=size, jobs=args.jobs)
     print(f"{len(made)} scene folders in {args.out}")
     return 0
+
+
+def _split(text) -> list | None:
+    return None if text is None else [k for k in text.split(",") if k]
+
+
+def _photos(parser, args) -> list:
+    """The photos the arguments ask for (module docstring)."""
+    presets, kinds, channels = _split(args.presets), _split(args.kinds), \
+        _split(args.channels)
+    for given, known, what in ((presets, sets.PRESETS, "preset"), (kinds, KINDS, "kind"),
+                               (channels, tuple(sets.CHANNELS), "channel")):
+        unknown = sorted(set(given or ()) - set(known))
+        if unknown:
+            parser.error(f"unknown {what} {', '.join(unknown)}; use {', '.join(known)}")
+    if args.set is not None:
+        if args.seeds is not None or args.first_seed is not None or args.totems_study:
+            parser.error("--set fixes the seeds and the totems study: drop --seeds, "
+                         "--first-seed and --totems-study")
+        return select(sets.photos(args.set), presets=presets, kinds=kinds,
+                      channels=channels, first=2 if args.small else None)
+    if channels not in (None, ["pristine"]):
+        parser.error("--channels needs --set")
+    first = 1 if args.first_seed is None else args.first_seed
+    n_seeds = args.seeds or (2 if args.small else 5)
+    return standard_photos(presets or ["box", "envmap"],
+                           range(first, first + n_seeds),
+                           KINDS if kinds is None else kinds, args.totems_study)
 
 
 if __name__ == "__main__":

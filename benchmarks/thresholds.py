@@ -10,7 +10,8 @@ needs: seconds a scene instead of a fit), then prints each judging metric's scor
 per scene (``report.json`` ``scores``) and the threshold the rule gives: ``factor`` times
 the largest score, so that no untouched photo of the held-out set is called
 inconsistent and a photo must look a quarter worse than the worst of them to be.
-The values go into ``verify/verdict.py`` by hand, with the date and the figures.
+The values go into ``verify/verdict.py`` by hand with one line of provenance; the date
+and the figures go into ``docs/decisions.md``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+from scenes.folder import PHOTO_NAMES
 
 
 def check(scene: Path, out: Path, reverify: bool = False) -> Path:
@@ -56,7 +59,8 @@ def main(argv=None) -> int:
     p.add_argument("--reverify", action="store_true",
                    help="verify again with the fits in OUT (after a change to verify/)")
     args = p.parse_args(argv)
-    scenes = sorted(d for d in args.scenes.iterdir() if (d / "image.png").is_file())
+    scenes = sorted(d for d in args.scenes.iterdir()
+                    if any((d / n).is_file() for n in PHOTO_NAMES))
     if not scenes:
         print(f"error: no scene folders in {args.scenes}", file=sys.stderr)
         return 2

@@ -25,7 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.camera import project
 from scenes.errors import BadInput
+
+__all__ = ["FrustumFrame", "frame_for_scene", "resample", "cells_to_pixels"]
 
 
 @dataclass(frozen=True)
@@ -51,13 +54,9 @@ class FrustumFrame:
     def to_unit(self, X) -> np.ndarray:
         """Camera-frame points ``X`` (..., 3), metres -> unit grid coordinates (..., 3)."""
         X = np.asarray(X, dtype=np.float64)
-        K = np.asarray(self.K, dtype=np.float64)
-        z = X[..., 2]
-        u = K[0, 0] * X[..., 0] / z + K[0, 2]
-        v = K[1, 1] * X[..., 1] / z + K[1, 2]
-        s = (u - self.u_range[0]) / (self.u_range[1] - self.u_range[0])
-        t = (v - self.v_range[0]) / (self.v_range[1] - self.v_range[0])
-        r = (1.0 / self.near - 1.0 / z) / (1.0 / self.near - 1.0 / self.far)
+        uv = project(self.K, X)
+        s, t = self.pixel_to_st(uv[..., 0], uv[..., 1])
+        r = (1.0 / self.near - 1.0 / X[..., 2]) / (1.0 / self.near - 1.0 / self.far)
         return np.stack([s, t, r], axis=-1)
 
     def from_unit(self, g) -> np.ndarray:
@@ -66,11 +65,15 @@ class FrustumFrame:
         K = np.asarray(self.K, dtype=np.float64)
         u = self.u_range[0] + g[..., 0] * (self.u_range[1] - self.u_range[0])
         v = self.v_range[0] + g[..., 1] * (self.v_range[1] - self.v_range[0])
-        inv_z = 1.0 / self.near - g[..., 2] * (1.0 / self.near - 1.0 / self.far)
-        z = 1.0 / inv_z
+        z = self.depth_at(g[..., 2])
         x = (u - K[0, 2]) / K[0, 0] * z
         y = (v - K[1, 2]) / K[1, 1] * z
         return np.stack([x, y, z], axis=-1)
+
+    def depth_at(self, r):
+        """Depth (camera-frame ``z``, metres) at the grid's inverse-depth coordinate
+        ``r`` (0 at ``near``, 1 at ``far``); ``r`` keeps its dtype."""
+        return 1.0 / (1.0 / self.near - r * (1.0 / self.near - 1.0 / self.far))
 
     def pixel_to_st(self, u, v) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates -> the grid's ``(s, t)`` (the column a camera ray follows)."""
@@ -144,3 +147,33 @@ def resample(values: np.ndarray, shape) -> np.ndarray:
     out = np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
                     for c in range(values.shape[3])], axis=-1)
     return out.astype(np.float32)
+
+
+def cells_to_pixels(cells, frame: FrustumFrame, size, *, nearest: bool = False) -> np.ndarray:
+    """A (nt, ns) map over the frame's ``(s, t)`` range, read at every pixel (H, W).
+
+    ``nearest``: the cell each pixel centre falls in. Otherwise bilinear between cell
+    centres where the cells around the pixel are known (finite), NaN where the nearest
+    cell is unknown.
+    """
+    from scipy import ndimage
+
+    W, H = size
+    nt, ns = cells.shape
+    uu, vv = np.meshgrid(np.arange(W), np.arange(H))
+    s, t = frame.pixel_to_st(uu.ravel(), vv.ravel())
+    fs, ft = np.asarray(s) * ns, np.asarray(t) * nt          # cell i spans [i, i + 1)
+    if nearest:
+        i = np.clip(fs.astype(int), 0, ns - 1)
+        j = np.clip(ft.astype(int), 0, nt - 1)
+        return cells[j, i].reshape(H, W)
+    fs, ft = fs - 0.5, ft - 0.5                               # cell-centred
+    known = np.isfinite(cells)
+    filled = np.where(known, cells, 0.0)
+    num = ndimage.map_coordinates(filled, [ft, fs], order=1, mode="nearest")
+    den = ndimage.map_coordinates(known.astype(np.float64), [ft, fs], order=1,
+                                  mode="nearest")
+    near = ndimage.map_coordinates(known.astype(np.float64), [ft, fs], order=0,
+                                   mode="nearest") > 0.5
+    out = np.where(near & (den > 1e-6), num / np.maximum(den, 1e-6), np.nan)
+    return out.reshape(H, W)

@@ -31,26 +31,29 @@ change meaning when the grid is refined.
 
 Parameters (``mi.traverse``): ``density`` (nr, nt, ns, 1) raw density before the
 softplus; ``colour`` (nr', nt', ns', 3) linear RGB; ``centers`` (3 n floats, metres,
-camera frame; x of every totem, then y, then z). Construction options (props):
-``n_samples`` (int, default 64): samples per ray; ``totems`` (bool, default False):
-refract camera rays through the totems in :meth:`sample`; ``drop_top_exits`` (bool,
-default False): mark totem rays that leave through the top face invalid (see
-:func:`leaves_through_top`).
+camera frame; x of every totem, then y, then z). Construction option (props):
+``n_samples`` (int, default 64): samples per ray. Totem rays that leave the grid through
+its top face are invalid (:func:`leaves_through_top`). The class is made at the first
+use (:func:`integrator_class`), since its Mitsuba base needs the variant chosen.
 """
 
 from __future__ import annotations
 
+import functools
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from inverse.grid import FrustumFrame
+from inverse.sphere import totem_rays
 from scenes import backend
 
-backend.use()
+if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
+    import mitsuba as mi
 
-import drjit as dr  # noqa: E402
-import mitsuba as mi  # noqa: E402
-
-from inverse.grid import FrustumFrame  # noqa: E402
-from inverse.sphere import totem_rays  # noqa: E402
+__all__ = ["DELTA_SCALE", "softplus", "FrameConstants", "ray_segment",
+           "leaves_through_top", "march", "distortion", "select_center", "TotemGrid",
+           "integrator_class"]
 
 #: Length, in unit grid coordinates, of one unit of ``delta`` (density is per 1/100).
 DELTA_SCALE = 100.0
@@ -58,11 +61,13 @@ DELTA_SCALE = 100.0
 
 def softplus(x):
     """``log(1 + exp(x))``, overflow-safe; its gradient never vanishes (unlike ReLU)."""
+    dr = backend.modules()[0]
     return dr.select(x > 20.0, x, dr.log(1.0 + dr.exp(dr.minimum(x, 20.0))))
 
 
 def _opaque(x) -> mi.Float:
     """A scalar as an opaque Dr.Jit value: changing it does not recompile kernels."""
+    dr, mi = backend.modules()
     v = mi.Float(float(x))
     dr.make_opaque(v)
     return v
@@ -85,6 +90,7 @@ class FrameConstants:
 
     def unit(self, p):
         """Camera-frame points (mi.Point3f, metres) -> unit grid coordinates."""
+        mi = backend.modules()[1]
         s = (self.fx * p.x / p.z + self.cx - self.u0) / self.du
         t = (self.fy * p.y / p.z + self.cy - self.v0) / self.dv
         r = (self.inv_near - 1.0 / p.z) / self.dinv
@@ -107,6 +113,7 @@ def ray_segment(fc: FrameConstants, o, d):
     valid : mi.Bool
         The ray starts in front of the camera and crosses the grid.
     """
+    dr, mi = backend.modules()
     eps = 1e-4
     dz = dr.select(dr.abs(d.z) > eps, d.z, eps)
     t_end = dr.select(d.z > eps, (fc.far - o.z) / dz,
@@ -165,6 +172,7 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     w : mi.Float, per lane: the compositing weights (sum to 1 per ray).
     m : mi.Float, per lane: the sample's position along the segment in [0, 1].
     """
+    dr, mi = backend.modules()
     lanes = dr.width(g0)
     k = dr.arange(mi.UInt32, lanes) % n
     m = (mi.Float(k) + (0.5 if jitter is None else jitter)) / n
@@ -191,6 +199,7 @@ def distortion(w, m, n: int):
     by exclusive prefix sums: ``2 sum_i w_i (m_i W_<i - (wm)_<i)``. Small when each
     ray's weight sits in one short interval (an opaque surface).
     """
+    dr = backend.modules()[0]
     W_ex = dr.block_prefix_sum(w, n, exclusive=True)
     WM_ex = dr.block_prefix_sum(w * m, n, exclusive=True)
     per_lane = 2.0 * w * (m * W_ex - WM_ex) + dr.square(w) / (3.0 * n)
@@ -200,6 +209,7 @@ def distortion(w, m, n: int):
 def select_center(centers, index):
     """Per-lane totem centre: ``centers`` (x, y, z mi.Float of width n_totems),
     ``index`` (mi.UInt32 per lane). A select chain, whose adjoint is a plain sum."""
+    dr, mi = backend.modules()
     n_tot = dr.width(centers[0])
     P = [mi.Float(0.0)] * 3
     for j in range(n_tot):
@@ -209,25 +219,26 @@ def select_center(centers, index):
     return mi.Point3f(*P)
 
 
-class TotemGridIntegrator(mi.SamplingIntegrator):
-    """Emission-absorption rendering of the frustum grid, optionally through totems.
+class TotemGrid:
+    """Emission-absorption rendering of the frustum grid: camera columns, or totem
+    pixels' rays refracted through their sphere (:meth:`render_totem_rays`). Only the
+    methods: :func:`integrator_class` puts them on a Mitsuba integrator.
 
     Set the scene-specific parts with :meth:`setup` (frame, grids, totems); the grids
     and centres are then Mitsuba parameters (``mi.traverse``), differentiable.
     """
 
     def __init__(self, props=None):
+        mi = backend.modules()[1]
         props = props if props is not None else mi.Properties()
-        super().__init__(props)
+        mi.SamplingIntegrator.__init__(self, props)
         self.n_samples = int(props.get("n_samples", 64))
-        self.totems = bool(props.get("totems", False))
         self.fc = None
         self.density = None
         self.colour = None
         self.centers = None
         self.radius = None
         self.ior = None
-        self.drop_top_exits = bool(props.get("drop_top_exits", False))
 
     # ------------------------------------------------------------------ parameters
 
@@ -235,6 +246,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
               centers=None, radius=None, ior=None):
         """Scene parts: the frame, raw density (nr, nt, ns, 1), linear colour
         (nr', nt', ns', 3), totem centres (n, 3) m, radii (n,) m, IoR (n,)."""
+        mi = backend.modules()[1]
         self.fc = FrameConstants(frame)
         self.density = mi.Texture3f(mi.TensorXf(np.asarray(density, np.float32)))
         self.colour = mi.Texture3f(mi.TensorXf(np.asarray(colour, np.float32)))
@@ -246,6 +258,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         return self
 
     def traverse(self, callback):
+        mi = backend.modules()[1]
         callback.put("density", self.density.tensor(), mi.ParamFlags.Differentiable)
         callback.put("colour", self.colour.tensor(), mi.ParamFlags.Differentiable)
         if self.centers is not None:
@@ -257,6 +270,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
 
     def center_array(self):
         """The centres as three mi.Float of width n_totems (x, y, z)."""
+        dr, mi = backend.modules()
         n = dr.width(self.centers) // 3
         idx = dr.arange(mi.UInt32, n)
         return [dr.gather(mi.Float, self.centers, idx + a * n, mode=dr.ReduceMode.Direct)
@@ -275,6 +289,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         Returns per-ray linear colour, and per-lane weights and positions (see
         :func:`march`).
         """
+        mi = backend.modules()[1]
         n = n or self.n_samples
         s = mi.Float(np.repeat(np.asarray(s, np.float32), n))
         t = mi.Float(np.repeat(np.asarray(t, np.float32), n))
@@ -290,6 +305,7 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         transmittance ``T_F`` and validity per ray (:func:`inverse.sphere.totem_rays`),
         differentiable in the centres.
         """
+        dr, mi = backend.modules()
         d_cam = np.asarray(d_cam, np.float32)
         d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
         idx = mi.UInt32(np.asarray(totem_index, np.uint32))
@@ -313,12 +329,11 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         w, m : per-lane weights and positions (see :func:`march`).
         g0, g1 : per-lane segment ends (unit coordinates).
         """
+        dr, mi = backend.modules()
         n = n or self.n_samples
         o_out, d_out, T_F, ok = self.refract(d_cam, totem_index)
         g0, g1, inside = ray_segment(self.fc, o_out, d_out)
-        valid = ok & inside
-        if self.drop_top_exits:
-            valid &= ~leaves_through_top(g1)
+        valid = ok & inside & ~leaves_through_top(g1)
         dr.eval(g0, g1, T_F, valid)
         # Per ray -> per lane: dr.repeat's adjoint is a block sum (no atomics).
         g0_l = mi.Point3f(*[dr.repeat(g0[a], n) for a in range(3)])
@@ -327,49 +342,41 @@ class TotemGridIntegrator(mi.SamplingIntegrator):
         return C * T_F, valid, w, m, g0_l, g1_l
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        """One camera ray per lane (camera frame = world frame): refracted through the
-        nearest totem it hits when ``totems`` is set, then marched through the grid."""
+        """One camera ray per lane (camera frame = world frame), marched through the
+        grid: the camera view, as :meth:`render_columns` gives it."""
+        dr, mi = backend.modules()
         n = self.n_samples
         m_rays = dr.width(ray.o)
-        o, d = mi.Point3f(ray.o), mi.Vector3f(ray.d)
         idx = dr.arange(mi.UInt32, m_rays * n) // n
-        o = dr.gather(mi.Point3f, o, idx)
-        d = dr.gather(mi.Vector3f, d, idx)
-        T_F = mi.Float(1.0)
-        if self.totems and self.centers is not None:
-            cx, cy, cz = self.center_array()
-            best = mi.Float(dr.inf)
-            hit_j = mi.UInt32(0)
-            any_hit = mi.Bool(False)
-            for j in range(dr.width(cx)):
-                Pj = mi.Point3f(dr.gather(mi.Float, cx, j), dr.gather(mi.Float, cy, j),
-                                dr.gather(mi.Float, cz, j))
-                Rj = dr.gather(mi.Float, self.radius, j)
-                f = mi.Vector3f(o - Pj)
-                b = dr.dot(f, d)
-                disc = dr.square(b) - (dr.squared_norm(f) - dr.square(Rj))
-                t_hit = -b - dr.sqrt(dr.maximum(disc, 0.0))
-                h = (disc > 0) & (t_hit > 0) & (t_hit < best)
-                best = dr.select(h, t_hit, best)
-                hit_j = dr.select(h, j, hit_j)
-                any_hit |= h
-            P = select_center([cx, cy, cz], hit_j)
-            R = dr.gather(mi.Float, self.radius, hit_j)
-            eta = dr.gather(mi.Float, self.ior, hit_j)
-            o_out, d_out, T_t, ok = totem_rays(o, d, P, R, eta)
-            o = mi.Point3f(dr.select(any_hit, o_out, o))
-            d = mi.Vector3f(dr.select(any_hit, d_out, d))
-            T_F = dr.select(any_hit, dr.select(ok, T_t, 0.0), 1.0)
+        o = dr.gather(mi.Point3f, mi.Point3f(ray.o), idx)
+        d = dr.gather(mi.Vector3f, mi.Vector3f(ray.d), idx)
         g0, g1, inside = ray_segment(self.fc, o, d)
         C, _, _ = march(self.density, self.colour, g0, g1, n)
-        keep = dr.block_sum(dr.select(inside, T_F, 0.0), n) / n
+        keep = dr.block_sum(dr.select(inside, 1.0, 0.0), n) / n
         return mi.Spectrum(C * keep), mi.Bool(active), []
 
     def aov_names(self):
         return []
 
     def to_string(self):
-        return f"TotemGridIntegrator[n_samples={self.n_samples}, totems={self.totems}]"
+        return f"TotemGridIntegrator[n_samples={self.n_samples}]"
 
 
-mi.register_integrator("totem_grid", lambda props: TotemGridIntegrator(props))
+@functools.cache
+def integrator_class():
+    """``TotemGridIntegrator``: the methods of :class:`TotemGrid` on a
+    ``mi.SamplingIntegrator`` (registered as ``"totem_grid"``), made at the first use
+    since its Mitsuba base needs the variant chosen (and nanobind allows one base)."""
+    mi = backend.modules()[1]
+    methods = {k: v for k, v in vars(TotemGrid).items()
+               if k not in ("__dict__", "__weakref__")}
+    TotemGridIntegrator = type("TotemGridIntegrator", (mi.SamplingIntegrator,), methods)
+    mi.register_integrator("totem_grid", lambda props: TotemGridIntegrator(props))
+    return TotemGridIntegrator
+
+
+def __getattr__(name):
+    """``TotemGridIntegrator``: the class of :func:`integrator_class` (PEP 562)."""
+    if name == "TotemGridIntegrator":
+        return integrator_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -18,15 +18,17 @@ minimises the same residual).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from inverse import pose
 from scenes import backend
 
-backend.use()
+if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
+    import mitsuba as mi
 
-import drjit as dr  # noqa: E402  (after backend.use(), which picks the variant)
-import mitsuba as mi  # noqa: E402
+__all__ = ["outline_targets", "outline_residuals", "outline_loss"]
 
 
 def outline_targets(masks, K) -> tuple[np.ndarray, np.ndarray]:
@@ -46,6 +48,7 @@ def outline_targets(masks, K) -> tuple[np.ndarray, np.ndarray]:
 
 def _as_centers(centers):
     """Centres as something ``dr.gather(mi.Vector3f, ., idx)`` reads per totem."""
+    mi = backend.modules()[1]
     if isinstance(centers, (mi.Point3f, mi.Vector3f, mi.Array3f)):
         return mi.Vector3f(centers)
     if isinstance(centers, mi.Float):            # flat [x0, y0, z0, x1, ...]
@@ -65,6 +68,7 @@ def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
     rays : (m, 3) numpy or mi.Vector3f, unit camera-frame directions of outline points
     ray_totem : (m,) ints (numpy or mi.UInt32), the totem of each ray
     """
+    dr, mi = backend.modules()
     C = _as_centers(centers)
     d = rays if isinstance(rays, mi.Vector3f) else \
         mi.Vector3f(np.asarray(rays, dtype=np.float32).T)
@@ -88,6 +92,7 @@ def outline_loss(centers, radius, rays, ray_totem, *, scale: float = 1.0) -> mi.
     ``scale`` multiplies the residuals: 1 gives radians squared, ``fx`` about pixels
     squared. Returns a mi.Float of width 1.
     """
+    dr, mi = backend.modules()
     tid = np.asarray(ray_totem).astype(np.int64).ravel()
     if tid.size == 0:
         raise ValueError("outline_loss needs at least one outline ray")

@@ -38,6 +38,11 @@ import numpy as np
 from scenes import camera
 from scenes.errors import BadInput
 
+__all__ = ["METHODS", "MIN_GAP_M", "MAX_DISTANCE_M", "MIN_AREA_PX", "SPECK_FRACTION",
+           "ROUND_TOL_PX", "ROUND_TOL_REL", "mask_outline_uv", "mask_outline_rays",
+           "tangent_residuals", "fit_ellipse", "cone_from_conic", "pose_from_cone",
+           "pose_conic", "pose_cone", "initial_pose"]
+
 METHODS = ("conic", "cone")
 
 MIN_GAP_M = 0.01          # the sphere's nearest point must be this far from the camera

@@ -23,31 +23,36 @@ fraction of unpolarised light that crosses both surfaces.
 
 Public functions: :func:`intersect`, :func:`refract` (one surface),
 :func:`refract_in_out` (both), :func:`totem_rays` / :func:`totem_path` (camera rays
-through one given totem per ray), :func:`totem_rays_nearest` (several totems, the first
-one each ray meets), :func:`totem_scene` / :func:`totem_rays_scene` (Mitsuba's
+through one given totem per ray), :func:`nearest_totem` (the first of several totems
+each ray meets, analytically), :func:`totem_scene` / :func:`totem_rays_scene` (Mitsuba's
 ``ray_intersect`` picks the totem, occluders included; the optics stay analytic).
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from scenes import backend
 
-backend.use()
+if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
+    import mitsuba as mi
 
-import drjit as dr  # noqa: E402  (after the variant is chosen)
-import mitsuba as mi  # noqa: E402
+__all__ = ["COS_VALID", "intersect", "refract", "refract_in_out", "TotemPath",
+           "totem_path", "totem_rays", "nearest_totem", "totem_scene",
+           "totem_rays_scene"]
 
 #: Rays meeting the surface more obliquely than this (cosine of the incidence
 #: angle) are flagged invalid: their exit direction is too sensitive to the pose.
-COS_MIN = 0.2
+COS_VALID = 0.2
 
 
-def _vec(x, cls=mi.Vector3f):
-    """A Dr.Jit 3-vector from a Dr.Jit array, or a numpy array of shape (3,) or (n, 3)."""
+def _vec(x, cls=None):
+    """A Dr.Jit 3-vector (``cls``, default ``mi.Vector3f``) from a Dr.Jit array, or a
+    numpy array of shape (3,) or (n, 3)."""
+    dr, mi = backend.modules()
+    cls = cls or mi.Vector3f
     if isinstance(x, dr.ArrayBase):
         return cls(x)
     a = np.asarray(x, dtype=np.float32)
@@ -60,6 +65,7 @@ def _vec(x, cls=mi.Vector3f):
 
 def _float(x):
     """``mi.Float`` from a Dr.Jit array or a numpy array; Python floats stay floats."""
+    dr, mi = backend.modules()
     if isinstance(x, (float, int)) or isinstance(x, dr.ArrayBase):
         return x
     a = np.asarray(x, dtype=np.float32)
@@ -95,6 +101,7 @@ def intersect(o, d, P, R):
     hit : mi.Bool
         The line meets the sphere (discriminant > 0) and ``t_far > 0``.
     """
+    dr, mi = backend.modules()
     o, d, P, R = _vec(o, mi.Point3f), _vec(d), _vec(P, mi.Point3f), _float(R)
     f = mi.Vector3f(o - P)
     a = dr.squared_norm(d)
@@ -141,6 +148,7 @@ def refract(d, N, eta):
     tir : mi.Bool
         Total internal reflection: no transmitted ray.
     """
+    dr, mi = backend.modules()
     d, N, eta = _vec(d), _vec(N), _float(eta)
     wi = -d                                  # Mitsuba's wi points back to the source
     cos_i = dr.dot(wi, N)                    # > 0 from outside, < 0 from inside
@@ -185,6 +193,7 @@ def refract_in_out(d_in, D, P, R, eta):
     tir : mi.Bool
         Total internal reflection at either surface.
     """
+    dr, mi = backend.modules()
     d_in, D, P = _vec(d_in), _vec(D, mi.Point3f), _vec(P, mi.Point3f)
     R, eta = _float(R), _float(eta)
     N1 = mi.Vector3f(D - P) / R
@@ -212,7 +221,7 @@ class TotemPath(NamedTuple):
     valid: mi.Bool       # hit, no TIR, not grazing
 
 
-def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
+def totem_path(o, d, P, R, eta, *, cos_valid: float = COS_VALID) -> TotemPath:
     """Trace camera rays through totems; see :func:`totem_rays` (this returns more).
 
     Lanes that are not valid (miss, totem behind or around the camera, grazing) are
@@ -220,6 +229,7 @@ def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
     ever formed, and their outputs are the input ray: ``D = E = o``,
     ``d_mid = d_out = d``, ``T = 0``, with no gradient with respect to ``P``.
     """
+    dr, mi = backend.modules()
     o, d, P = _vec(o, mi.Point3f), dr.normalize(_vec(d)), _vec(P, mi.Point3f)
     R, eta = _float(R), _float(eta)
     t_near, _, hit = intersect(o, d, P, R)
@@ -229,7 +239,7 @@ def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
     f = mi.Vector3f(o - P)
     l2 = dr.squared_norm(f - dr.dot(f, d) * d)
     cos_geom = dr.safe_sqrt(1 - l2 / dr.square(R))
-    ok = hit & (cos_geom >= cos_min)
+    ok = hit & (cos_geom >= cos_valid)
     # Invalid lanes: trace the central ray instead (well conditioned everywhere).
     d_safe = dr.select(ok, d, dr.normalize(mi.Vector3f(P - o)))
     t_in, _, _ = intersect(o, d_safe, P, R)
@@ -248,7 +258,7 @@ def totem_path(o, d, P, R, eta, *, cos_min: float = COS_MIN) -> TotemPath:
     )
 
 
-def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
+def totem_rays(o, d, P, R, eta, *, cos_valid: float = COS_VALID):
     """Scene rays seen through totems by camera rays (paper Sec. 4.1, Eqs. 1-6).
 
     Parameters
@@ -265,7 +275,7 @@ def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
         Totem radius, metres.
     eta : mi.Float or float
         Totem IoR relative to air, ``n_glass / n_air`` (e.g. 1.52).
-    cos_min : float
+    cos_valid : float
         Rays whose incidence cosine at entry is below this are flagged invalid
         (grazing). For a sphere the exit angle equals the entry angle, so this
         bounds both surfaces; TIR cannot occur for ``eta > 1`` but is flagged anyway.
@@ -285,12 +295,13 @@ def totem_rays(o, d, P, R, eta, *, cos_min: float = COS_MIN):
     All outputs are differentiable with respect to ``P`` (and ``o``, ``d``): the
     normals are recomputed from the hit points and the centre.
     """
-    path = totem_path(o, d, P, R, eta, cos_min=cos_min)
+    path = totem_path(o, d, P, R, eta, cos_valid=cos_valid)
     return path.E, path.d_out, path.T, path.valid
 
 
 def _per_totem(x, n: int) -> mi.Float:
     """Radius or IoR given once or once per totem, as an ``n``-lane ``mi.Float``."""
+    dr, mi = backend.modules()
     if isinstance(x, dr.ArrayBase):
         x = mi.Float(x)
         if dr.width(x) == 1 and n > 1:
@@ -307,6 +318,7 @@ def _per_totem(x, n: int) -> mi.Float:
 
 def _centers(centers) -> mi.Point3f:
     """Totem centres as an n-lane ``mi.Point3f`` (numpy (n, 3) accepted)."""
+    mi = backend.modules()[1]
     return _vec(centers, mi.Point3f)
 
 
@@ -329,6 +341,7 @@ def nearest_totem(o, d, centers, radius):
     t : mi.Float
         Ray parameter of the entry point (inf where none).
     """
+    dr, mi = backend.modules()
     C = np.array(dr.detach(_centers(centers)), dtype=np.float32).reshape(3, -1).T
     n = len(C)
     Rn = np.array(_per_totem(radius, n))
@@ -343,8 +356,9 @@ def nearest_totem(o, d, centers, radius):
     return index, dr.detach(t_best)
 
 
-def _trace_indexed(o, d, index, centers, radius, eta, cos_min):
+def _trace_indexed(o, d, index, centers, radius, eta, cos_valid):
     """totem_rays for rays already assigned to a totem (index -1: none)."""
+    dr, mi = backend.modules()
     centers = _centers(centers)
     n = dr.width(centers)
     R_n, eta_n = _per_totem(radius, n), _per_totem(eta, n)
@@ -355,23 +369,11 @@ def _trace_indexed(o, d, index, centers, radius, eta, cos_min):
     R = dr.gather(mi.Float, R_n, idx)
     eta_j = dr.gather(mi.Float, eta_n, idx)
     o, d = _vec(o, mi.Point3f), _vec(d)
-    path = totem_path(o, d, P, R, eta_j, cos_min=cos_min)
+    path = totem_path(o, d, P, R, eta_j, cos_valid=cos_valid)
     valid = path.valid & has
     return (mi.Point3f(dr.select(valid, path.E, o)),
             mi.Vector3f(dr.select(valid, path.d_out, dr.normalize(d))),
             dr.select(valid, path.T, 0.0), valid)
-
-
-def totem_rays_nearest(o, d, centers, radius, eta, *, cos_min: float = COS_MIN):
-    """:func:`totem_rays` for several totems, each ray through the first it meets.
-
-    ``centers`` (n lanes, ``mi.Point3f``; enable its gradient to fit it), ``radius``
-    and ``eta`` (one value or one per totem) as in :func:`totem_rays`. Returns
-    ``(o_out, d_out, T, valid, index)``, ``index`` as in :func:`nearest_totem`.
-    """
-    index, _ = nearest_totem(o, d, centers, radius)
-    o_out, d_out, T, valid = _trace_indexed(o, d, index, centers, radius, eta, cos_min)
-    return o_out, d_out, T, valid, index
 
 
 def totem_scene(centers, radius, *, extra: dict | None = None) -> mi.Scene:
@@ -380,6 +382,7 @@ def totem_scene(centers, radius, *, extra: dict | None = None) -> mi.Scene:
     ``centers`` numpy (n, 3) or ``mi.Point3f``, metres, camera frame; ``radius`` one
     value or one per totem. For :func:`totem_rays_scene`.
     """
+    dr, mi = backend.modules()
     C = np.array(dr.detach(_centers(centers)), dtype=np.float64).reshape(3, -1).T
     Rn = np.array(_per_totem(radius, len(C)), dtype=np.float64)
     desc = {"type": "scene"}
@@ -390,7 +393,7 @@ def totem_scene(centers, radius, *, extra: dict | None = None) -> mi.Scene:
 
 
 def totem_rays_scene(scene, ray, centers, radius, eta, *, shapes=None,
-                     cos_min: float = COS_MIN):
+                     cos_valid: float = COS_VALID):
     """:func:`totem_rays` with Mitsuba choosing which totem (if any) each ray sees.
 
     ``scene.ray_intersect`` finds the first surface along each camera ray; rays whose
@@ -417,8 +420,10 @@ def totem_rays_scene(scene, ray, centers, radius, eta, *, shapes=None,
 
     Returns
     -------
-    (o_out, d_out, T, valid, index) as :func:`totem_rays_nearest`.
+    (o_out, d_out, T, valid, index) : as :func:`totem_rays`, and the totem each ray
+    went through (as :func:`nearest_totem`: -1 for none).
     """
+    dr, mi = backend.modules()
     if shapes is None:
         shapes = sorted((s for s in scene.shapes() if s.id().startswith("totem")),
                         key=lambda s: s.id())
@@ -427,5 +432,5 @@ def totem_rays_scene(scene, ray, centers, radius, eta, *, shapes=None,
     for j, shape in enumerate(shapes):       # totems, not rays
         index = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(shape)), j, index)
     o_out, d_out, T, valid = _trace_indexed(ray.o, ray.d, index, centers, radius, eta,
-                                            cos_min)
+                                            cos_valid)
     return o_out, d_out, T, valid, index

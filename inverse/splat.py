@@ -9,9 +9,8 @@ with no colour grid in between.
 
 Which depth map is right is judged on the totem pixels alone, by leave-one-totem-out:
 the other totems' rays, splatted at the map, predict each held-out totem's pixels.
-A wrong map sends the totems' colours to different places, so they disagree.
-Measured (640x480, box and envmap seeds 1-5, true poses): this picked, in each of the
-10 scenes, the map whose splat was nearest to the truth.
+A wrong map sends the totems' colours to different places, so they disagree (see
+docs/decisions.md, "The camera view: grid or stereo").
 
 Public functions
 ----------------
@@ -27,7 +26,11 @@ from __future__ import annotations
 import numpy as np
 
 from inverse.grid import FrustumFrame
+from scenes.camera import project
 from inverse.sweep import pull_push, slice_depths
+
+__all__ = ["surface_hits", "splat_image", "holdout_errors", "holdout_error",
+           "error_map"]
 
 
 def surface_hits(o, d, frame: FrustumFrame, depth, *, n_steps: int = 256):
@@ -63,8 +66,7 @@ def surface_hits(o, d, frame: FrustumFrame, depth, *, n_steps: int = 256):
     for i, zk in enumerate(planes):
         t = (zk - o[:, 2]) / dz
         X = o + t[:, None] * d
-        u = K[0, 0] * X[:, 0] / zk + K[0, 2]
-        v = K[1, 1] * X[:, 1] / zk + K[1, 2]
+        u, v = project(K, X, zk).T
         s, r = frame.pixel_to_st(u, v)
         col, row = np.floor(s * ns), np.floor(r * nt)
         inside = (t > 0) & (col >= 0) & (col < ns) & (row >= 0) & (row < nt)
@@ -104,10 +106,8 @@ def splat_image(u, v, values, size, *, hit=None, at=None) -> np.ndarray:
     Between the pixels that rays reached, the values are interpolated linearly over
     their Delaunay triangulation (``scipy.interpolate.LinearNDInterpolator``); outside
     its hull, pull-push fills in. (Pull-push everywhere kept each sample pixel exact in
-    a blur of its coarser levels: a pattern of dots. Measured, the view splatted at the
-    true depth with the true centres, recon L1 over the protected region, box seeds
-    1-3 and envmap seeds 1-2 at 640x480: pull-push 0.073, linear 0.069; Clough-Tocher
-    cubic 0.078 and least squares with a squared-gradient prior 0.071-0.081 did worse.)
+    a blur of its coarser levels: a pattern of dots; see docs/decisions.md, 'splat:
+    linear interpolation, not pull-push everywhere'.)
 
     ``size`` = (W, H); ``hit`` (m,) bool selects the rays (default: finite ``u``).
     ``at`` = (ui, vi) integer pixels: return only the values there, (k, C), instead of

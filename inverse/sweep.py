@@ -34,6 +34,10 @@ import numpy as np
 from scipy import ndimage
 
 from inverse.grid import FrustumFrame
+from scenes.camera import project
+
+__all__ = ["SweepResult", "slice_depths", "pull_push", "semi_global", "SliceColours",
+           "slice_colours", "plane_sweep"]
 
 
 @dataclass
@@ -60,8 +64,7 @@ class SweepResult:
 
 def slice_depths(frame: FrustumFrame, n: int) -> np.ndarray:
     """Depths (metres) of ``n`` slice centres, even in the grid's inverse depth ``r``."""
-    r = (np.arange(n) + 0.5) / n
-    return 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
+    return frame.depth_at((np.arange(n) + 0.5) / n)
 
 
 def _splat(o, d, colour, totem, frame, z, res, n_tot):
@@ -80,8 +83,7 @@ def _splat(o, d, colour, totem, frame, z, res, n_tot):
     for k in range(nk):              # slices, not rays
         t = (z[k] - o[:, 2]) / dz
         X = o + t[:, None] * d
-        u = K[0, 0] * X[:, 0] / z[k] + K[0, 2]
-        v = K[1, 1] * X[:, 1] / z[k] + K[1, 2]
+        u, v = project(K, X, z[k]).T
         fs = (u - frame.u_range[0]) / du * ns - 0.5      # cell-centred coordinates
         ft = (v - frame.v_range[0]) / dv * nt - 0.5
         ok = (t > 0) & (fs > -1) & (fs < ns) & (ft > -1) & (ft < nt)
@@ -226,9 +228,8 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     ----------
     o, d : (m, 3) refracted rays leaving the totems (exit point, metres, and unit
         direction), camera frame. Rays near a sphere's rim carry blurred colours mixed
-        with reflections: leave them out (measured on box seed 2, 640x480: the true
-        slice is the least-cost one, +-2, in 49% of cells with every ray, 64% with
-        incidence cosine >= 0.5).
+        with reflections: leave them out (``inverse.view.choose_view`` keeps incidence
+        cosine >= 0.5; see docs/decisions.md, 'sweep: rim rays left out of the cost').
     colour : (m, C) colour each ray carries (e.g. sRGB of the radiance).
     totem : (m,) int, the totem each ray left.
     frame : the grid frame; the sweep's map covers its ``(s, t)`` range.
@@ -274,5 +275,5 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     known = (n_k >= 1).astype(np.float64) * np.minimum(w_col / peak, 1.0)
     col = pull_push(mean_k, known)
     r = (k_best + 0.5) / n_slices
-    depth = 1.0 / (1.0 / frame.near - r * (1.0 / frame.near - 1.0 / frame.far))
+    depth = frame.depth_at(r)
     return SweepResult(r=r, depth=depth, colour=col, confident=confident, cost=cost, z=z)

@@ -1,22 +1,19 @@
-"""The camera view's geometry: the fitted grid's or plane-sweep stereo's, whichever
-predicts held-out totems better, pixel by pixel; the stereo view is splatted.
+"""The camera view re-rendered from the fit: the grid's render, or plane-sweep stereo's
+splat, whichever predicts held-out totems better, pixel by pixel.
 
-The grid fit explains the totem pixels well but its geometry is weakly determined: a
-far backdrop explains each ray on its own, and the fit often settles there. Measured
-on the standard set (640x480, true poses, fixed evaluation region), the fitted grid's
-depth was within 10% of the truth for 3-31% of the protected pixels. Plane-sweep
-stereo between the totems with semi-global matching (:func:`inverse.sweep.plane_sweep`)
-finds textured rooms better (box: recon L1 0.134 -> 0.097 over seeds 1-5) and open
-scenes under a smooth sky worse (envmap: 0.085 -> 0.16). Leave-one-totem-out
-(:func:`inverse.splat.holdout_errors`) tells them apart from the totem pixels alone: it
-chose the better geometry in each of the 10 scenes. The same errors, spread over the
-image where the held-out rays land, choose per pixel: a room's floor from stereo and
-a can the sweep missed from the grid (box seed 1: untouched score 0.162 -> 0.128).
+The grid explains the totem pixels well but its geometry is weakly determined (a far
+backdrop explains each ray on its own); stereo between the totems
+(:func:`inverse.sweep.plane_sweep`) finds textured surfaces the grid missed and fails
+under a smooth sky. Leave-one-totem-out (:func:`inverse.splat.holdout_errors`) tells
+them apart from the totem pixels alone (see docs/decisions.md, "The camera view: grid or
+stereo").
 
 Public
 ------
-``choose_view(o, d, radiance, totem, cos_in, frame, grid_depth, grid_view, grid_points,
-size, ...) -> StereoView``;
+``render_view(itg, frame, size)``, ``render_grid(grid, size)``: the grid's view and depth;
+``column_depth(density, frame)``: the grid's surface depth per column;
+``peak_points(...)``: where the totem rays end in the grid;
+``choose_view(rays, frame, grid_depth, grid_view, grid_points, size, ...) -> StereoView``;
 ``stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo) -> (H, W)``.
 """
 
@@ -28,11 +25,21 @@ import numpy as np
 
 from scipy import ndimage
 
-from scenes.camera import pixel_rays, project
-from inverse.grid import FrustumFrame
+from inverse.grid import FrustumFrame, cells_to_pixels
+from inverse.integrator import DELTA_SCALE
+from inverse.rays import TotemRays
 from inverse.splat import error_map, holdout_errors, splat_image
 from inverse.sweep import plane_sweep, slice_colours
+from scenes import backend
+from scenes.camera import pixel_rays, project
 from scenes.colour import linear_to_srgb
+
+__all__ = ["StereoView", "choose_view", "stereo_weight", "render_view", "render_grid",
+           "column_depth", "peak_points", "COS_SWEEP"]
+
+COS_SWEEP = 0.5
+"""The stereo's cost uses only rays that entered their sphere at an incidence cosine of
+at least this: rim rays are blurred and mixed with reflection."""
 
 
 def _display(x):
@@ -63,17 +70,6 @@ class StereoView:
     recon: np.ndarray | None = None
     depth: np.ndarray | None = None
     points: np.ndarray | None = None
-
-
-def _map_to_pixels(values, frame: FrustumFrame, size) -> np.ndarray:
-    """A (nt, ns) map over the frame's range, read at every pixel (nearest cell)."""
-    W, H = size
-    nt, ns = values.shape
-    uu, vv = np.meshgrid(np.arange(W), np.arange(H))
-    s, t = frame.pixel_to_st(uu.ravel(), vv.ravel())
-    i = np.clip((np.asarray(s) * ns).astype(int), 0, ns - 1)
-    j = np.clip((np.asarray(t) * nt).astype(int), 0, nt - 1)
-    return values[j, i].reshape(H, W)
 
 
 def _resize_nearest(values, shape) -> np.ndarray:
@@ -119,21 +115,17 @@ def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
     return np.clip(ndimage.gaussian_filter(weight, sigma / 2), 0.0, 1.0)
 
 
-def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
-                grid_view, grid_points, size, *, res=(120, 160), n_slices: int = 64,
-                cos_min: float = 0.5, far_biases=(0.0, 1.0), sigma: float = 16.0,
+def choose_view(rays: TotemRays, frame: FrustumFrame, grid_depth, grid_view, grid_points,
+                size, *, res=(120, 160), n_slices: int = 64,
+                cos_sweep: float = COS_SWEEP, far_biases=(0.0, 1.0), sigma: float = 16.0,
                 min_rays: float = 0.05, sweep: dict | None = None,
                 margin: float = 0.9) -> StereoView:
     """Compare the grid's geometry with stereo maps, globally and pixel by pixel.
 
     Parameters
     ----------
-    o, d : (m, 3) refracted rays leaving the totems (exit point, metres; unit
-        direction), camera frame, valid rays only.
-    radiance : (m, 3) linear RGB each ray carries (Fresnel and reflection undone).
-    totem : (m,) int, the totem of each ray.
-    cos_in : (m,) incidence cosine at the sphere; the sweep's cost uses rays with
-        ``cos_in >= cos_min`` (rim rays are blurred and mixed with reflections).
+    rays : the totem pixels' rays leaving the glass (:class:`inverse.rays.TotemRays`).
+    cos_sweep : the sweep's cost uses the rays with ``cos_in >= cos_sweep``.
     frame : the grid's frame; maps cover its ``(s, t)`` range.
     grid_depth : (nt', ns') depth (metres) of the fitted grid's surface per column.
     grid_view, grid_points : the grid's render of the camera view (H, W, 3) sRGB and
@@ -148,21 +140,14 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     sweep : further keywords of :func:`inverse.sweep.plane_sweep` (``sigma``, ``p1``,
         ``p2``; its defaults if None).
     margin : stereo wins, for the whole view and pixel by pixel, only where its
-        held-out error is below ``margin`` times the grid's. The hold-out measures how
-        well the totems agree with each other, and they stand close together: a depth
-        that is wrong for the camera can still suit them. Measured (640x480, recon L1)
-        on held-out scenes (box and envmap seeds 11-18): envmap seed 12, hold-out ratio
-        0.99, 0.170 with stereo against 0.150 with the grid; seed 18, ratio 0.81, 0.180
-        against 0.167; box scenes (ratios 0.36-0.79) within 0.001 either way. On the
-        benchmark: envmap seed 3, ratio 0.92, 0.189 against 0.123; but box seed 2, ratio
-        0.81, 0.092 against 0.130: so 0.9, not 0.8.
+        held-out error is below ``margin`` times the grid's: the totems stand close
+        together, so a depth wrong for the camera can still suit them (see
+        docs/decisions.md, "Stereo margin 0.9").
     """
-    o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
-    radiance = np.asarray(radiance, np.float64)
-    totem = np.asarray(totem)
+    o, d, radiance, totem = rays.o, rays.d, rays.radiance, rays.totem
     W, H = size
     maps = {"grid": _resize_nearest(np.asarray(grid_depth, np.float64), res)}
-    good = np.asarray(cos_in) >= cos_min
+    good = rays.cos_in >= cos_sweep
     if len(np.unique(totem[good])) >= 2:
         colour = _display(radiance[good])
         sweep = dict(sweep or {})
@@ -185,7 +170,7 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     stereo_names = [k for k in maps if k != "grid"]
     if not stereo_names:
         return StereoView(chosen, holdout, 0.0, grid_view,
-                          _map_to_pixels(maps["grid"], frame, size).astype(np.float32),
+                          cells_to_pixels(maps["grid"], frame, size, nearest=True).astype(np.float32),
                           np.asarray(grid_points, np.float64))
     best = min(stereo_names, key=holdout.get)
     weight = stereo_weight(errors["grid"], errors[best], size,
@@ -199,8 +184,72 @@ def choose_view(o, d, radiance, totem, cos_in, frame: FrustumFrame, grid_depth,
     stereo_points = stereo_points / stereo_points[:, 2:3] * z[inside, None]
     points = np.concatenate([_points_where(stereo_points, frame.K, weight, True),
                              _points_where(grid_points, frame.K, weight, False)])
-    depth = weight * _map_to_pixels(maps[best], frame, size) \
-        + (1 - weight) * _map_to_pixels(maps["grid"], frame, size)
+    depth = weight * cells_to_pixels(maps[best], frame, size, nearest=True) \
+        + (1 - weight) * cells_to_pixels(maps["grid"], frame, size, nearest=True)
     return StereoView(chosen, holdout, float(weight.mean()),
                       np.clip(recon, 0.0, 1.0).astype(np.float32),
                       depth.astype(np.float32), points)
+
+
+def column_depth(density, frame: FrustumFrame) -> np.ndarray:
+    """Depth (metres) where each camera column of a raw density grid (nr, nt, ns, 1)
+    reaches transmittance 1/2 (the far plane if it never does), (nt, ns)."""
+    dens = np.asarray(density, np.float64)[..., 0]
+    nr = dens.shape[0]
+    tau = np.cumsum(np.logaddexp(0.0, dens) * DELTA_SCALE / nr, axis=0)
+    k = np.where(tau[-1] > np.log(2.0), np.argmax(tau > np.log(2.0), axis=0), nr - 1)
+    return frame.depth_at((k + 0.5) / nr)
+
+
+def render_view(itg, frame: FrustumFrame, size, *, n: int = 128, rows_per_chunk=None):
+    """The camera view re-rendered from the grid (no totems).
+
+    Returns
+    -------
+    recon : (H, W, 3) float32 sRGB [0, 1].
+    depth : (H, W) float32 metres, the weight-averaged depth along each column.
+    """
+    dr = backend.modules()[0]
+    W, H = size
+    rows_per_chunk = rows_per_chunk or max(1, 2_000_000 // (W * n))
+    recon = np.zeros((H, W, 3), np.float32)
+    depth = np.zeros((H, W), np.float32)
+    for r0 in range(0, H, rows_per_chunk):
+        r1 = min(H, r0 + rows_per_chunk)
+        vv, uu = np.mgrid[r0:r1, 0:W]
+        s, t = frame.pixel_to_st(uu.ravel(), vv.ravel())
+        with dr.suspend_grad():
+            C, w, m = itg.render_columns(s, t, n=n)
+        C = np.asarray(C).T
+        w = np.asarray(w).reshape(-1, n)
+        m = np.asarray(m).reshape(-1, n)
+        z = frame.depth_at(m)
+        recon[r0:r1] = linear_to_srgb(C).reshape(r1 - r0, W, 3)
+        depth[r0:r1] = ((w * z).sum(1) / np.maximum(w.sum(1), 1e-8)).reshape(r1 - r0, W)
+    return recon, depth
+
+
+def peak_points(frame, w, m, g0, g1, n, valid):
+    """Camera-frame point of highest weight along each valid totem ray, (m, 3) metres."""
+    w = w.reshape(-1, n)
+    k = np.argmax(w, axis=1)
+    rows = np.arange(w.shape[0])
+    mm = m.reshape(-1, n)[rows, k]
+    a = g0.T.reshape(-1, n, 3)[rows, k]
+    b = g1.T.reshape(-1, n, 3)[rows, k]
+    g = a + mm[:, None] * (b - a)
+    pts = frame.from_unit(g)
+    return pts[valid & np.all(np.isfinite(pts), axis=1)]
+
+
+def render_grid(grid: dict, size, *, n: int = 128):
+    """Re-render the camera view from a saved grid (``load_fit(...).grid``).
+
+    Returns (recon sRGB (H, W, 3) float32, depth (H, W) metres).
+    """
+    from inverse.integrator import integrator_class
+
+    mi = backend.modules()[1]
+    frame = FrustumFrame.from_dict(grid)
+    itg = integrator_class()(mi.Properties()).setup(frame, grid["density"], grid["colour"])
+    return render_view(itg, frame, size, n=n)

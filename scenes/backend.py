@@ -8,11 +8,16 @@ process abort, not an exception. So the library is chosen *before* Dr.Jit loads 
 2. else the libLLVM shipped by the ``karellen-llvm-core`` wheel (a dependency);
 3. else whatever the system has, checked by version before any kernel runs.
 
-Every module that touches Mitsuba calls :func:`use` instead of ``mi.set_variant``.
+The choice is made at the first Dr.Jit use, never when a module is imported: code that
+needs Dr.Jit or Mitsuba gets them from :func:`modules` (which calls :func:`use`), in the
+function that uses them, so that no ``import drjit`` can run before the library is
+chosen.
 ``TOTEMS_VARIANT`` forces a variant; ``TOTEMS_THREADS`` caps Dr.Jit's worker threads.
 """
 
 from __future__ import annotations
+
+__all__ = ["use", "modules", "describe", "BackendError"]
 
 import glob
 import os
@@ -107,6 +112,16 @@ def use(variant: str | None = None) -> str:
         dr.set_thread_count(int(threads))
     _variant = variant
     return variant
+
+
+def modules():
+    """``(drjit, mitsuba)`` with the variant chosen (:func:`use`): the way every function
+    that needs them gets them, so that Dr.Jit never loads a libLLVM before :func:`use`."""
+    use()
+    import drjit
+    import mitsuba
+
+    return drjit, mitsuba
 
 
 def describe() -> dict:

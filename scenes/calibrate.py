@@ -27,6 +27,9 @@ import numpy as np
 from scenes import folder
 from scenes.errors import BadInput
 
+__all__ = ["DETECT_MAX_SIDE", "board_points", "find_corners", "calibrate",
+           "undistorted_K", "valid_roi", "write_calib"]
+
 DETECT_MAX_SIDE = 1600    # corners are found on a copy at most this wide, then refined
 
 

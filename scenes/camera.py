@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["intrinsics", "scale_intrinsics", "project", "pixel_rays", "mitsuba_sensor"]
+
 
 def intrinsics(width: int, height: int, fov_x_deg: float) -> np.ndarray:
     """3x3 ``K`` with square pixels, principal point at the image centre.
@@ -22,11 +24,29 @@ def intrinsics(width: int, height: int, fov_x_deg: float) -> np.ndarray:
                      [0.0, 0.0, 1.0]])
 
 
-def project(K: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """Project camera-frame points ``X`` (..., 3) in metres to pixels (..., 2)."""
+def scale_intrinsics(K: np.ndarray, scale: float) -> np.ndarray:
+    """``K`` of the image resized by ``scale`` (both axes; ``cv2.resize`` with
+    ``fx = fy = scale``): fx, fy and the skew times ``scale``, and the principal point
+    mapped with the pixel-centre convention, ``c' = (c + 0.5) scale - 0.5`` (pixel u
+    spans [u - 0.5, u + 0.5], so the image's edge -0.5 stays at -0.5)."""
+    s = float(scale)
+    S = np.array([[s, 0.0, 0.5 * (s - 1.0)], [0.0, s, 0.5 * (s - 1.0)], [0.0, 0.0, 1.0]])
+    return S @ np.asarray(K, dtype=np.float64)
+
+
+def project(K: np.ndarray, X: np.ndarray, z=None) -> np.ndarray:
+    """Project camera-frame points ``X`` (..., 3) in metres to pixels (..., 2).
+
+    ``u = (fx x + skew y) / z + cx``, ``v = fy y / z + cy``. ``z`` (broadcast against
+    ``X[..., 2]``) is the points' depth when it is known exactly, e.g. a depth plane's
+    that the points were put on; by default ``X[..., 2]``.
+    """
     X = np.asarray(X, dtype=np.float64)
-    x = X @ np.asarray(K, dtype=np.float64).T
-    return x[..., :2] / x[..., 2:3]
+    K = np.asarray(K, dtype=np.float64)
+    z = X[..., 2] if z is None else z
+    u = (K[0, 0] * X[..., 0] + K[0, 1] * X[..., 1]) / z + K[0, 2]
+    v = K[1, 1] * X[..., 1] / z + K[1, 2]
+    return np.stack([u, v], axis=-1)
 
 
 def pixel_rays(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -44,8 +64,9 @@ def mitsuba_sensor(K: np.ndarray, width: int, height: int, spp: int = 16,
     Assumes square pixels (fx == fy). Mitsuba looks down +z with up -y, which makes
     its world frame the OpenCV camera frame.
     """
-    import mitsuba as mi
+    from scenes import backend
 
+    mi = backend.modules()[1]
     K = np.asarray(K, dtype=np.float64)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if abs(fx - fy) > 1e-6 * fx:

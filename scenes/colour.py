@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["linear_to_srgb", "srgb_to_linear"]
+__all__ = ["linear_to_srgb", "srgb_to_linear", "linear_to_srgb_dr"]
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
@@ -22,3 +22,13 @@ def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
     return np.where(x <= 0.04045, x / 12.92,
                     np.power((x + 0.055) / 1.055, 2.4)).astype(np.float32)
+
+
+def linear_to_srgb_dr(x):
+    """:func:`linear_to_srgb` on a Dr.Jit array, differentiable (clamped to [1e-6, 1]
+    so that the power's gradient stays finite at black)."""
+    from scenes import backend
+
+    dr = backend.modules()[0]
+    x = dr.clip(x, 1e-6, 1.0)
+    return dr.select(x <= 0.0031308, 12.92 * x, 1.055 * dr.power(x, 1 / 2.4) - 0.055)

@@ -17,14 +17,11 @@ ellipse's five), which no longer settles on an ellipse tilted by texture.
 
 Candidates are ranked by the geometric mean of the coarse ring score and the fitted
 contour's support, times the busyness; a candidate only suppresses a shifted copy of
-itself of about its size (a large floor circle around a totem no longer hides it).
+itself of about its size (a large floor circle around a totem no longer hides it; see
+docs/decisions.md, 'masks: ranking by ring score and contour support').
 
-Measured at 640x480 on rendered scenes, seeds 1-5, with K (totems found at IoU >= 0.95
-with the true masks): envmap 20 of 20 (IoU 0.983-0.999); box 15 of 20 (0.96-0.996),
-seeds 1, 2 and 4 missing one totem, seed 5 (a checkerboard floor) two: floors of grass,
-coins and checkers make rings that outrank a totem whose edge is faint against the floor
-it shows, and such a mask must be drawn by hand. Before the ranking and suppression
-above (16 candidates): envmap 19 of 20, box 10 of 20. About 20 s a photo.
+Floors of grass, coins and checkers make rings that can outrank a totem whose edge is
+faint against the floor it shows; such a mask must be drawn by hand.
 Masks drawn by hand are always preferred: :func:`write_masks` never
 replaces them, and writes a picture for a person to check either kind.
 """
@@ -35,35 +32,17 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes import folder
+from scenes import folder, silhouette
 from scenes.errors import BadInput
 
-MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (_support)
-MIN_AXIS_RATIO = 0.75    # a sphere seen by a normal lens: minor/major axis of its image
+__all__ = ["find_totems", "ellipse_masks", "radius_range", "expected_totems",
+           "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE", "propose_masks",
+           "draw_check", "write_masks"]
+
+MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (silhouette.support)
 MIN_SCORE = 0.2          # circle score (see _candidates) of a totem when n is not given
 MAX_CANDIDATES = 48
 WORK_SIZE = 240          # candidates are searched on a copy with this shorter side
-GRID_SHIFTS = (-0.1, 0.0, 0.1)              # cone starts: centre shifts, in radii,
-GRID_SIZES = (0.85, 0.95, 1.05, 1.15)       # and sizes, times the candidate's radius
-
-
-def _orientation_field(img: np.ndarray, sigma: float = 1.0):
-    """Doubled-angle gradient orientation (cos 2t, sin 2t) of a colour image, each
-    pixel weighted by its edge strength saturated at the 90th percentile (so a strong
-    texture edge counts no more than a faint silhouette edge)."""
-    import cv2
-
-    sm = cv2.GaussianBlur(img, (0, 0), sigma)
-    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    if gx.ndim == 3:
-        jxx, jyy, jxy = (gx * gx).sum(-1), (gy * gy).sum(-1), (gx * gy).sum(-1)
-    else:
-        jxx, jyy, jxy = gx * gx, gy * gy, gx * gy
-    e2 = jxx + jyy
-    sat = np.minimum(np.sqrt(e2) / (np.percentile(np.sqrt(e2), 90) + 1e-6), 1.0)
-    k = sat / (e2 + 1e-12)
-    return (jxx - jyy) * k, 2 * jxy * k
 
 
 def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.ndarray:
@@ -85,7 +64,7 @@ def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.nd
     i_in = int(np.round(np.log(0.78) / np.log(step)))
     i_out = int(np.round(np.log(1.25) / np.log(step)))
     all_r = radii[0] * step ** np.arange(i_in, len(radii) + i_out)
-    a, b = _orientation_field(img)
+    a, b = silhouette.orientation_field(img)
     H, W = a.shape
     pad = int(np.ceil(all_r.max() + 3 * (0.8 + 0.04 * all_r.max()))) + 1
     Hp, Wp = sf.next_fast_len(H + pad), sf.next_fast_len(W + pad)
@@ -125,220 +104,9 @@ def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.nd
     return np.array(out, float).reshape(-1, 4)
 
 
-def _gradients(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Image derivatives d/dx, d/dy (per channel, per pixel) after a Gaussian blur."""
-    import cv2
-
-    sm = cv2.GaussianBlur(img, (0, 0), sigma)
-    return (cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
-            cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
-
-
-def _ellipse_points(p, n: int = 120):
-    """Points (n, 2) and unit outward normals (n, 2) of the ellipse
-    p = (cx, cy, a, b, angle_rad) (semi-axes a, b in pixels)."""
-    cx, cy, a, b, ang = p
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    c, s = np.cos(ang), np.sin(ang)
-    ex, ey = a * np.cos(t), b * np.sin(t)
-    nx_, ny_ = np.cos(t) / a, np.sin(t) / b
-    nx, ny = c * nx_ - s * ny_, s * nx_ + c * ny_
-    nn = np.hypot(nx, ny)
-    return (np.stack([cx + c * ex - s * ey, cy + s * ex + c * ey], -1),
-            np.stack([nx / nn, ny / nn], -1))
-
-
-def _remap(field, pts) -> np.ndarray:
-    """Bilinear samples of an image-shaped ``field`` at points (n, 2) = (x, y) pixels."""
-    import cv2
-
-    X = pts[None, :, 0].astype(np.float32)
-    Y = pts[None, :, 1].astype(np.float32)
-    return cv2.remap(field, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
-
-
-def _edge_at(pts, nrm, gx, gy) -> np.ndarray:
-    """|dI/dn| (n,): the image's step across a contour at its points ``pts`` (n, 2) with
-    unit normals ``nrm`` (n, 2) (colour norm; ``gx``, ``gy`` from :func:`_gradients`)."""
-    sx, sy = _remap(gx, pts), _remap(gy, pts)
-    return np.linalg.norm(sx * nrm[:, :1] + sy * nrm[:, 1:], axis=-1)
-
-
-def _orientation_at(pts, nrm, a, b) -> np.ndarray:
-    """cos(2 phi) (n,) at the points of a contour, phi the angle between the image
-    gradient and the contour's normal, weighted by saturated edge strength
-    (``a``, ``b`` from :func:`_orientation_field`)."""
-    c2 = nrm[:, 0] ** 2 - nrm[:, 1] ** 2
-    s2 = 2 * nrm[:, 0] * nrm[:, 1]
-    return _remap(a, pts) * c2 + _remap(b, pts) * s2
-
-
-def _edge_along(p, gx, gy, n: int = 120) -> np.ndarray:
-    """:func:`_edge_at` on the ellipse p = (cx, cy, a, b, angle_rad)."""
-    return _edge_at(*_ellipse_points(p, n), gx, gy)
-
-
-def _orientation_along(p, a, b, n: int = 180) -> np.ndarray:
-    """:func:`_orientation_at` on the ellipse p = (cx, cy, a, b, angle_rad)."""
-    return _orientation_at(*_ellipse_points(p, n), a, b)
-
-
-def _cone_points(q, K, n: int = 180):
-    """Image of the cone of rays tangent to a sphere: points (n, 2) and unit outward
-    normals (n, 2).
-
-    q = (u0, v0, s): the cone's axis is the ray through pixel (u0, v0), its half-angle
-    is arctan(s / f) (s in pixels, f = K[0, 0]); K (3, 3) OpenCV intrinsics. A sphere's
-    silhouette is exactly this curve (an ellipse elongated away from the principal
-    point), whatever the sphere's radius: three parameters instead of an ellipse's five.
-    """
-    from scenes.camera import pixel_rays, project
-
-    u0, v0, s = q
-    axis = pixel_rays(K, u0, v0)
-    h = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    e1 = np.cross(h, axis)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    ring = np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2
-
-    def image(alpha):
-        return project(K, np.cos(alpha) * axis + np.sin(alpha) * ring)
-
-    alpha = np.arctan(abs(s) / K[0, 0])
-    pts = image(alpha)
-    nrm = image(alpha + 1e-4) - pts
-    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
-
-
-def _refine_cone(field, cand, K, shape, polish=None):
-    """:func:`_refine` for a camera of known intrinsics ``K``: the silhouette is fitted
-    as a sphere's tangent cone (:func:`_cone_points`, three parameters), by Nelder-Mead
-    from the two best of a grid of shifts (:data:`GRID_SHIFTS` radii) and sizes
-    (:data:`GRID_SIZES`) around the candidate circle. Returns the cone's image as a
-    cv2 ellipse, or None (as :func:`_refine`).
-    """
-    import cv2
-    from scipy.optimize import minimize
-
-    a_f, b_f = field
-    cx, cy, r = (float(v) for v in cand[:3])
-
-    def cost(q):
-        return -_orientation_at(*_cone_points(q, K), a_f, b_f).mean() if q[2] > 2 else 0.0
-
-    grid = [np.array([cx + du * r, cy + dv * r, k * r]) for du in GRID_SHIFTS
-            for dv in GRID_SHIFTS for k in GRID_SIZES]
-    starts = sorted(grid, key=cost)[:2]
-    fits = [minimize(cost, q0, method="Nelder-Mead",
-                     options=dict(xatol=0.02, fatol=1e-6, maxiter=300)) for q0 in starts]
-    q = min(fits, key=lambda f: f.fun).x
-    if polish is not None:              # sub-pixel: the steepest step near that contour
-        gx, gy = polish
-        q = minimize(lambda q: -_edge_at(*_cone_points(q, K), gx, gy).mean()
-                     if q[2] > 2 else 0.0, q, method="Nelder-Mead",
-                     options=dict(xatol=0.01, fatol=1e-8, maxiter=300)).x
-    if not np.isfinite(q).all():
-        return None
-    (ex, ey), (A, B), ang = cv2.fitEllipse(_cone_points(q, K, 90)[0].astype(np.float32))
-    ell = (float(ex), float(ey), A / 2.0, B / 2.0, np.radians(ang))
-    return _accept(ell, cand, shape)
-
-
-def _refine(field, cand, shape, polish=None):
-    """Fit an ellipse to the silhouette near a candidate circle (cx, cy, r).
-
-    The ellipse (cx, cy, a, b, angle) along which the image gradient is best aligned
-    with the normal (saturated strength, :func:`_orientation_along`) is found by
-    Nelder-Mead from the circle: a whole contour is fitted at once, so texture edges
-    that cross it do not pull it away. With ``polish`` = (d/dx, d/dy) of the image
-    (:func:`_gradients`), the ellipse is then moved to the largest mean step across it
-    (sub-pixel; the saturated alignment is flat across a rim a few pixels wide).
-    Returns the ellipse as cv2 ((cx, cy), (2a, 2b), angle_deg), or None when the fit
-    leaves the candidate, is not sphere-like or is cut by the frame.
-    """
-    from scipy.optimize import minimize
-
-    a_f, b_f = field
-    cx, cy, r = (float(v) for v in cand[:3])
-    p0 = np.array([cx, cy, r, r * 1.01, 0.1])
-    p = minimize(lambda q: -_orientation_along(q, a_f, b_f).mean()
-                 if min(abs(q[2]), abs(q[3])) > 2 else 0.0, p0, method="Nelder-Mead",
-                 options=dict(xatol=0.02, fatol=1e-6, maxiter=600)).x
-    if polish is not None:              # sub-pixel: the steepest step near that contour
-        gx, gy = polish
-        p = minimize(lambda q: -_edge_along(q, gx, gy, 180).mean()
-                     if min(abs(q[2]), abs(q[3])) > 2 else 0.0, p, method="Nelder-Mead",
-                     options=dict(xatol=0.01, fatol=1e-8, maxiter=600)).x
-    return _accept(p, cand, shape)
-
-
-def _accept(p, cand, shape):
-    """The fitted ellipse p = (cx, cy, a, b, angle_rad) as cv2 ((cx, cy), (2a, 2b),
-    angle_deg), or None when it left the candidate circle (cx, cy, r), is not
-    sphere-like, or is cut by the frame of ``shape`` (H, W)."""
-    cx, cy, a, b, ang = p
-    a, b = abs(a), abs(b)
-    r = float(cand[2])
-    H, W = shape
-    if not (np.isfinite(p).all() and min(a, b) > 3) or min(a, b) / max(a, b) < MIN_AXIS_RATIO:
-        return None
-    if np.hypot(cx - cand[0], cy - cand[1]) > 0.4 * r or not 0.75 < (a + b) / (2 * r) < 1.3:
-        return None                     # wandered off to another contour
-    R = max(a, b)
-    if cx - R < -0.2 * R or cy - R < -0.2 * R or cx + R > W - 1 + 0.2 * R \
-            or cy + R > H - 1 + 0.2 * R:
-        return None                     # cut by the frame: not a usable totem
-    return ((cx, cy), (2 * a, 2 * b), float(np.degrees(ang)))
-
-
-def _support(ell, field) -> float:
-    """Alignment of the gradient with the normal of the ellipse ell (cv2 form), less the
-    same on copies 0.78 and 1.25 times as large, in the worst of four quarters: > 0
-    when the fitted contour is an edge all the way round."""
-    (cx, cy), (A, B), ang = ell
-    a, b, t = A / 2.0, B / 2.0, np.radians(ang)
-    on = _orientation_along((cx, cy, a, b, t), *field, 120).reshape(4, -1).mean(1)
-    near = np.stack([_orientation_along((cx, cy, a * f, b * f, t), *field, 120)
-                     .reshape(4, -1).mean(1) for f in (0.78, 1.25)]).max(0)
-    return float((on - np.maximum(near, 0)).min())
-
-
-def _busyness(ell, edge: np.ndarray) -> float:
-    """Mean gradient magnitude ``edge`` inside the ellipse (0.8 of its size) over that
-    in the ring 1.2-1.8 times its size. A glass sphere shows a minified view of the
-    scene, busier than the floor around it; a circle inscribed in a floor tile or an
-    opaque ball is smoother inside than out."""
-    (cx, cy), (A, B), ang = ell
-    R = 0.9 * max(A, B)
-    H, W = edge.shape
-    x0, x1 = int(max(0, cx - R)), int(min(W, cx + R + 1))
-    y0, y1 = int(max(0, cy - R)), int(min(H, cy + R + 1))
-    v, u = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-    c, s = np.cos(np.radians(ang)), np.sin(np.radians(ang))
-    x, y = c * (u - cx) + s * (v - cy), -s * (u - cx) + c * (v - cy)
-    rho = np.hypot(x / (A / 2.0), y / (B / 2.0))
-    e = edge[y0:y1, x0:x1]
-    inner, outer = e[rho < 0.8], e[(rho > 1.2) & (rho < 1.8)]
-    if inner.size == 0 or outer.size == 0:
-        return 1.0
-    return float(inner.mean() / (outer.mean() + 1e-6))
-
-
-def ellipse_mask(ell, shape) -> np.ndarray:
-    """(H, W) bool: pixel centres (u, v) inside the ellipse ((cx, cy), (A, B), angle_deg)
-    (full axes A, B in pixels, as cv2)."""
-    (cx, cy), (A, B), ang = ell
-    H, W = shape
-    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
-    c, s = np.cos(np.radians(ang)), np.sin(np.radians(ang))
-    x, y = c * (u - cx) + s * (v - cy), -s * (u - cx) + c * (v - cy)
-    return (x / (A / 2.0)) ** 2 + (y / (B / 2.0)) ** 2 < 1.0
-
-
 def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | None = None,
-                  r_max: float | None = None, K: np.ndarray | None = None) -> np.ndarray:
+                  r_max: float | None = None, K: np.ndarray | None = None,
+                  hints=None) -> np.ndarray:
     """Propose totem masks for a photo.
 
     Parameters
@@ -349,8 +117,10 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
     r_min, r_max : range of totem radii in the image, pixels (default 1.5% to 25% of
         the shorter side).
     K : (3, 3) OpenCV intrinsics of the photo, when known: each silhouette is then
-        fitted as a sphere's tangent cone (3 parameters, :func:`_refine_cone`) rather
+        fitted as a sphere's tangent cone (3 parameters, :func:`silhouette.fit_cone`) rather
         than a free ellipse (5).
+    hints : (k, 2) pixel points (x, y), one inside each totem: the search is made
+        around each (one totem a hint) instead of over the whole photo.
 
     Returns
     -------
@@ -358,61 +128,122 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
 
     Raises BadInput when no totem (or fewer than ``n``) is found.
     """
+    found = find_totems(image, n=n, r_min=r_min, r_max=r_max, K=K, hints=hints)
+    if not found:
+        raise BadInput("no totem found in the photo; draw its masks by hand "
+                       "(totem_masks/totem_000.png, white = totem)")
+    if n is not None and len(found) < n:
+        raise BadInput(f"found {len(found)} totems but {n} were expected; draw the "
+                       f"missing masks by hand (totem_masks/, white = totem)")
+    return ellipse_masks(found, np.shape(image)[:2])
+
+
+def radius_range(shape, r_min: float | None = None, r_max: float | None = None):
+    """The searched totem radii in pixels: by default 1.5% (at least 5 px) to 25% of
+    the photo's shorter side."""
+    short = min(shape[:2])
+    return (max(5.0, 0.015 * short) if r_min is None else float(r_min),
+            0.25 * short if r_max is None else float(r_max))
+
+
+def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None = None,
+                r_max: float | None = None, K: np.ndarray | None = None,
+                hints=None) -> list:
+    """The totems found in a photo, as (cv2 ellipse, score), left to right; at most
+    ``n`` (every one that passes the checks when None), or one per hint (see
+    :func:`propose_masks` for the parameters). May find fewer than asked."""
     img = np.asarray(image, np.float32)
     if img.ndim != 3 or img.shape[2] < 3:
         raise BadInput("propose_masks needs an (H, W, 3) colour photo")
-    H, W = img.shape[:2]
-    short = min(H, W)
-    r_min = max(5.0, 0.015 * short) if r_min is None else float(r_min)
-    r_max = 0.25 * short if r_max is None else float(r_max)
+    colour = np.ascontiguousarray(img[..., :3])
+    r_min, r_max = radius_range(colour.shape, r_min, r_max)
+    K = None if K is None else np.asarray(K, float)
+    if hints is not None and len(hints):
+        found = [_best_near(colour, h, r_min, r_max, K) for h in np.asarray(hints, float)]
+        found = [f for f in found if f is not None]
+    else:
+        keep = MAX_CANDIDATES if n is None else max(MAX_CANDIDATES, 4 * n)
+        cands = _search(colour, r_min, r_max, keep)
+        if n is None:
+            cands = cands[cands[:, 3] >= MIN_SCORE]
+        found = _apart(_fitted(colour, cands, K))
+        found = found if n is None else found[:n]
+    return sorted(found, key=lambda t: t[0][0][0])
+
+
+def ellipse_masks(found, shape) -> np.ndarray:
+    """(k, H, W) bool masks of :func:`find_totems`'s ellipses."""
+    H, W = shape[:2]
+    return np.stack([silhouette.ellipse_mask(e, (H, W)) for e, _ in found]) if found \
+        else np.zeros((0, H, W), bool)
+
+
+def _search(colour, r_min, r_max, keep) -> np.ndarray:
+    """Circle candidates (m, 4) of :func:`_candidates`, on a copy about
+    :data:`WORK_SIZE` px high, in the photo's pixels."""
     import cv2
 
-    colour = np.ascontiguousarray(img[..., :3])
-    scale = min(1.0, WORK_SIZE / short)        # candidates on a small copy, fits at full size
+    scale = min(1.0, WORK_SIZE / min(colour.shape[:2]))
     small = colour if scale == 1.0 else cv2.resize(colour, None, fx=scale, fy=scale,
                                                    interpolation=cv2.INTER_AREA)
-    keep = MAX_CANDIDATES if n is None else max(MAX_CANDIDATES, 4 * n)
     cands = _candidates(small, max(4.0, r_min * scale), r_max * scale, keep)
     cands[:, :3] /= scale
+    return cands
 
-    if n is None:
-        cands = cands[cands[:, 3] >= MIN_SCORE]
-    K = None if K is None else np.asarray(K, float)
-    field = _orientation_field(colour, 1.0)
-    polish = _gradients(colour, 0.7)
+
+def _fitted(colour, cands, K) -> list:
+    """Each candidate fitted to the silhouette and scored, (ellipse, score), best first;
+    candidates whose fitted contour is not an edge all the way round are dropped."""
+    H, W = colour.shape[:2]
+    field = silhouette.orientation_field(colour, 1.0)
+    polish = silhouette.gradients(colour, 0.7)
     edge = np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
-    found = []                           # (ellipse, score), best first
+    found = []
     for cand in cands:
-        ell = (_refine(field, cand, (H, W), polish) if K is None
-               else _refine_cone(field, cand, K, (H, W), polish))
+        ell = (silhouette.fit_ellipse(field, cand, (H, W), polish) if K is None
+               else silhouette.fit_cone(field, cand, K, (H, W), polish))
         if ell is None:                  # keep the circle when the fit fails
             ell = ((cand[0], cand[1]), (2 * cand[2], 2 * cand[2]), 0.0)
-        support = _support(ell, field)
+        support = silhouette.support(ell, field)
         if support >= MIN_SUPPORT_FIT:  # both the coarse ring score and the fitted edge
             score = np.sqrt(max(cand[3], 0.0) * support)
-            found.append((ell, score * np.clip(_busyness(ell, edge), 0.5, 1.3)))
-    found.sort(key=lambda t: -t[1])
-    chosen = []                          # greedy: best first, no two overlapping
+            found.append((ell, score * np.clip(silhouette.busyness(ell, edge), 0.5, 1.3)))
+    return sorted(found, key=lambda t: -t[1])
+
+
+def _apart(found) -> list:
+    """Greedily, best first, the ellipses that overlap no better one."""
+    chosen = []
     for ell, score in found:
         (cx, cy), (A, B), _ = ell
         if all(np.hypot(e[0][0] - cx, e[0][1] - cy) > 0.5 * (max(e[1]) + max(A, B)) * 0.9
                for e, _ in chosen):
             chosen.append((ell, score))
-    found = chosen
-    if not found:
-        raise BadInput("no totem found in the photo; draw its masks by hand "
-                       "(totem_masks/totem_000.png, white = totem)")
-    if n is not None:
-        if len(found) < n:
-            raise BadInput(f"found {len(found)} totems but {n} were expected; draw the "
-                           f"missing masks by hand (totem_masks/, white = totem)")
-        found = found[:n]
-    found.sort(key=lambda t: t[0][0][0])
-    return np.stack([ellipse_mask(e, (H, W)) for e, _ in found])
+    return chosen
 
 
-def draw_check(image: np.ndarray, masks: np.ndarray) -> np.ndarray:
-    """The photo with each mask's outline and number drawn on it, (H, W, 3) uint8."""
+def _best_near(colour, hint, r_min, r_max, K):
+    """The best totem whose fitted outline holds the pixel ``hint`` (x, y), searched in
+    a window around it, or None."""
+    H, W = colour.shape[:2]
+    x, y = hint
+    if not (0 <= x < W and 0 <= y < H):
+        raise BadInput(f"hint {x:g},{y:g} lies outside the {W}x{H} photo")
+    half = int(np.ceil(2.2 * r_max)) + 4
+    x0, y0 = max(0, int(x) - half), max(0, int(y) - half)
+    crop = np.ascontiguousarray(colour[y0:int(y) + half + 1, x0:int(x) + half + 1])
+    cands = _search(crop, r_min, min(r_max, 0.45 * min(crop.shape[:2])), 16)
+    cands[:, 0] += x0
+    cands[:, 1] += y0
+    holds = np.hypot(cands[:, 0] - x, cands[:, 1] - y) < cands[:, 2]
+    fitted = [f for f in _fitted(colour, cands[holds], K)
+              if np.hypot(f[0][0][0] - x, f[0][0][1] - y) < 0.5 * max(f[0][1])]
+    return fitted[0] if fitted else None
+
+
+def draw_check(image: np.ndarray, masks: np.ndarray, *, hints=None) -> np.ndarray:
+    """The photo with each mask's outline and number drawn on it (and a cross at each
+    hint), (H, W, 3) uint8."""
     import cv2
 
     out = (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8).copy()
@@ -428,6 +259,9 @@ def draw_check(image: np.ndarray, masks: np.ndarray) -> np.ndarray:
         ys, xs = np.nonzero(m)
         cv2.putText(out, str(j), (int(xs.mean()) - 4 * thick, int(ys.min()) - 3 * thick),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4 * thick, col, thick, cv2.LINE_AA)
+    for x, y in ([] if hints is None else np.asarray(hints, float)):
+        cv2.drawMarker(out, (int(round(x)), int(round(y))), (255, 255, 255),
+                       cv2.MARKER_CROSS, 6 * thick, thick)
     return out
 
 
@@ -439,20 +273,40 @@ def _scene_K(scene_dir) -> np.ndarray | None:
         return None
 
 
-def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = None) -> dict:
+def expected_totems(scene_dir) -> int | None:
+    """How many totems the scene's key lists (``totems.json`` as a list), or None when
+    it gives one radius and IoR for all (or there is no key)."""
+    import json
+
+    path = Path(scene_dir) / "totems.json"
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return len(data) if isinstance(data, list) else None
+
+
+def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = None,
+                hints=None, radii=None) -> dict:
     """Give a scene folder totem masks, unless it has some, and a picture to check them.
 
     ``totem_masks/*.png`` already there (e.g. drawn by hand) are used as given, never
-    overwritten; otherwise ``masks`` (or :func:`propose_masks` of the photo) are written
-    as ``totem_masks/totem_000.png``... (the folder appears complete or not at all).
-    ``totem_masks_check.png`` (outlines over the photo) is (re)written either way.
+    overwritten; otherwise ``masks`` (or :func:`find_totems` of the photo, with
+    ``hints`` and ``radii`` = (min, max) px) are written as ``totem_masks/totem_000.png``...
+    (the folder appears complete or not at all). The number wanted is ``n``, else one
+    per hint, else as many as the key lists (:func:`expected_totems`). When fewer are
+    found, no mask is written and the summary says so (``complete`` false, ``found``,
+    ``expected``, ``searched``). ``totem_masks_check.png`` (outlines over the photo) is
+    (re)written either way.
 
-    Returns {"proposed": bool, "n": int, "masks": [paths], "check": path}.
+    Returns {"proposed": bool, "complete": bool, "n": int, "masks": [paths],
+    "check": path} (and ``found``, ``expected``, ``searched`` when incomplete).
     """
     scene_dir = Path(scene_dir)
-    image = folder.read_image(scene_dir / "image.png", what="photo")
+    image = folder.read_image(folder.photo_path(scene_dir), what="photo")
     mask_dir = scene_dir / "totem_masks"
     existing = sorted(mask_dir.glob("*.png")) if mask_dir.is_dir() else []
+    check = scene_dir / "totem_masks_check.png"
     if existing:
         masks = np.stack([folder.read_mask(f, what="totem mask") for f in existing])
         if masks.shape[1:] != image.shape[:2]:
@@ -460,9 +314,26 @@ def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = N
         order = np.argsort([np.nonzero(m)[1].mean() if m.any() else 0 for m in masks],
                            kind="stable")
         masks, files, proposed = masks[order], [existing[i] for i in order], False
-    else:
-        if masks is None:
-            masks = propose_masks(image, n=n, K=_scene_K(scene_dir))
+    elif masks is None:
+        # --n or the hints say how many there are; the key's list only how many are
+        # wanted: then only candidates that pass MIN_SCORE count, the best of them
+        told = n or (len(hints) if hints is not None and len(hints) else None)
+        want = told or expected_totems(scene_dir)
+        r_lo, r_hi = radius_range(image.shape, *(radii or (None, None)))
+        found = find_totems(image, n=told, r_min=r_lo, r_max=r_hi, K=_scene_K(scene_dir),
+                            hints=hints)
+        if want is not None and len(found) > want:
+            found = sorted(sorted(found, key=lambda t: -t[1])[:want],
+                           key=lambda t: t[0][0][0])
+        masks = ellipse_masks(found, image.shape)
+        if not found or (want is not None and len(found) < want):
+            folder.write_image(check, draw_check(image, masks, hints=hints))
+            where = (f"around the {len(hints)} hints" if hints is not None and len(hints)
+                     else "over the whole photo")
+            return {"proposed": True, "complete": False, "n": 0, "masks": [],
+                    "check": str(check), "found": len(found), "expected": want,
+                    "searched": f"{where}, totem radii {r_lo:.0f}-{r_hi:.0f} px"}
+    if not existing:
         masks = np.asarray(masks, bool)
         if masks.ndim != 3 or masks.shape[1:] != image.shape[:2]:
             raise BadInput("masks must be (n, H, W) the size of the photo")
@@ -471,7 +342,6 @@ def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = N
                 folder.write_image(tmp / f"totem_{j:03d}.png", m)
         files = [mask_dir / f"totem_{j:03d}.png" for j in range(len(masks))]
         proposed = True
-    check = scene_dir / "totem_masks_check.png"
-    folder.write_image(check, draw_check(image, masks))
-    return {"proposed": proposed, "n": int(len(masks)), "masks": [str(f) for f in files],
-            "check": str(check)}
+    folder.write_image(check, draw_check(image, masks, hints=hints))
+    return {"proposed": proposed, "complete": True, "n": int(len(masks)),
+            "masks": [str(f) for f in files], "check": str(check)}

@@ -17,7 +17,9 @@ import numpy as np
 from scenes import folder
 from scenes.errors import BadInput
 
-RESERVED = {"image.png", "calib.npy", "totems.json", "manip_mask.png",
+__all__ = ["RESERVED", "undistort_maps", "undistort", "ingest"]
+
+RESERVED = {*folder.PHOTO_NAMES, "calib.npy", "totems.json", "manip_mask.png",
             "initial_totem_pose.npy", "totem_masks_check.png"}
 
 

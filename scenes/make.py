@@ -1,4 +1,4 @@
-"""Make a synthetic totem-protected scene folder (layout: ``shared/CONTRACT.md``).
+"""Make a synthetic totem-protected scene folder (layout: ``docs/contract.md``).
 
 ``image.png`` is the path-traced photo with the glass totems; ``truth/clean.png`` is
 the same camera, scene and sampler seed without them (so their noise agrees wherever
@@ -15,21 +15,32 @@ import numpy as np
 from scenes import folder, presets, render
 from scenes.errors import BadInput
 
+__all__ = ["make_scene"]
+
+CAMERA_STREAM = 1          # the camera noise's generator: (sampler seed, this)
+
 
 def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
-               n_totems: int = 4, spp: int = 64, radius: float = presets.TOTEM_RADIUS,
-               ior: float = presets.TOTEM_IOR, progress: bool = False) -> Path:
+               n_totems: int | None = None, spp: int = 64, radius: float | None = None,
+               ior: float | None = None, camera: bool = False,
+               progress: bool = False) -> Path:
     """Render a random scene of ``preset`` and write its folder at ``out``.
 
     Parameters
     ----------
     out : the folder to create (must not exist, or be empty).
-    preset : "box" or "envmap" (:mod:`scenes.presets`).
+    preset : one of ``presets.PRESETS``.
     seed : the scene's random seed (same seed, same scene and same pixels).
     size : (W, H) in pixels.
-    n_totems : number of glass spheres (>= 1).
+    n_totems : number of glass spheres (>= 1); None: the preset's.
     spp : samples per pixel of both renders.
-    radius, ior : the totems' radius (m) and index of refraction: the key.
+    radius, ior : the totems' radius (m) and index of refraction, the key, for all
+        totems; None: the preset's (:func:`scenes.presets.describe`). ``totems.json``
+        holds one entry when all totems share it, else one per totem, left to right.
+    camera : a realistic camera: photon and read noise on the linear render, before
+        the sRGB tone curve (:func:`scenes.channel.photon_noise`, seeded by ``seed``);
+        the photo only, ``truth/clean.png`` stays the scene. Off by default, so scenes
+        made before it keep their pixels.
     progress : show a progress bar on stderr.
 
     Returns
@@ -38,7 +49,7 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     truth/ (clean.png, totem_pose.npy, scene.json with the description and timings).
     """
     out = Path(out)
-    if int(n_totems) < 1:
+    if n_totems is not None and int(n_totems) < 1:
         raise BadInput(f"a scene needs at least one totem, got {n_totems}")
     if not 1 <= int(spp) <= 65536:
         raise BadInput(f"samples per pixel must be 1..65536, got {spp}")
@@ -50,7 +61,17 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     timings = {}
     t0 = time.perf_counter()
     sampler_seed = int(seed) % 2**31
-    image = render.render(desc, spp=spp, seed=sampler_seed)
+    if camera:
+        from scenes.channel import FULL_WELL_E, READ_NOISE_E, photon_noise
+        from scenes.colour import linear_to_srgb
+
+        linear = render.render(desc, spp=spp, seed=sampler_seed, linear=True)
+        rng = np.random.default_rng([sampler_seed, CAMERA_STREAM])
+        image = linear_to_srgb(photon_noise(linear, rng))
+        extra = {"camera": {"full_well_e": FULL_WELL_E, "read_noise_e": READ_NOISE_E}}
+    else:
+        image = render.render(desc, spp=spp, seed=sampler_seed)
+        extra = {}
     timings["photo_s"] = round(time.perf_counter() - t0, 2)
     bar.update()
     t0 = time.perf_counter()
@@ -70,10 +91,21 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     masks = masks[order]
     pose = np.array([t["center"] for t in desc["totems"]], float)[order]
     record = dict(desc, spp=int(spp), sampler=render.sampler_type(spp),
-                  sampler_seed=sampler_seed, timings=timings)
+                  sampler_seed=sampler_seed, timings=timings, **extra)
     truth = folder.Truth(clean=clean, totem_pose=pose, scene=record)
+    radius, ior = _key(desc["totems"], order)
     return folder.write_scene(out, image=image, K=np.asarray(desc["K"], float),
-                              masks=masks, radius=float(radius), ior=float(ior), truth=truth)
+                              masks=masks, radius=radius, ior=ior, truth=truth)
+
+
+def _key(totems: list, order) -> tuple:
+    """The key as ``folder.write_scene`` takes it: one (radius m, ior) when every
+    totem shares it, else per-totem arrays in the masks' ``order``."""
+    radius = np.array([t["radius"] for t in totems], float)[order]
+    ior = np.array([t["ior"] for t in totems], float)[order]
+    if np.all(radius == radius[0]) and np.all(ior == ior[0]):
+        return float(radius[0]), float(ior[0])
+    return radius, ior
 
 
 def _bar(enabled: bool, total: int):

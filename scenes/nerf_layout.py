@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from scenes import folder
 
+__all__ = ["NERF_RADIUS", "NERF_IOR", "read_nerf_case"]
+
 NERF_RADIUS = 0.1       # metres: configs/*.txt of the NeRF path
 NERF_IOR = 1.52         # run.py --ior_totem default
 

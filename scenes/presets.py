@@ -1,7 +1,12 @@
 """Random synthetic scenes as plain descriptions (dicts), as in the paper's Sec. 5.1.
 
-Two presets, both seen by an OpenCV camera at the origin whose frame is the world
-frame (+x right, +y down, +z forward; metres):
+Five presets (``PRESETS``), all seen by an OpenCV camera at the origin whose frame is
+the world frame (+x right, +y down, +z forward; metres). ``box`` and ``envmap``, the
+ones the thresholds were first calibrated on, are drawn here; ``outdoor``
+(:mod:`scenes.preset_outdoor`), ``window`` (:mod:`scenes.preset_rooms`) and
+``tabletop`` (:mod:`scenes.preset_tabletop`) differ from them in lighting, scale,
+camera (field of view, pitch, roll, an off-centre principal point) and key (radius and
+IoR drawn per totem), and are built from :mod:`scenes.preset_kit`.
 
 ``box``
     A closed room like a Cornell box: floor, ceiling and four walls papered with
@@ -11,10 +16,16 @@ frame (+x right, +y down, +z forward; metres):
 ``envmap``
     A textured ground plane with random objects on it, lit by and surrounded by an
     environment map made from a bundled photograph.
+``outdoor``
+    Natural ground, a sun and a sky with distant scenery, things 2.5-16 m away.
+``window``
+    A furnished room lit through a window (a textured area light in an opening).
+``tabletop``
+    A table close up (0.5-1.6 m), small things, totems of 6-8 cm lying on it.
 
-Both carry ``n_totems`` glass spheres floating between the camera and the scene, near
-the bottom of the frame, each wholly inside the image and apart from the others in
-the image, about 1-2 m from the camera. The camera looks slightly down on the floor:
+Box and envmap carry ``n_totems`` glass spheres floating between the camera and the
+scene, near the bottom of the frame, each wholly inside the image and apart from the
+others in the image, about 1-2 m from the camera. The camera looks slightly down on the floor:
 the room is pitched in the camera frame, the camera itself is never moved.
 
 The description is JSON-serialisable and is the whole scene: ``render.render(desc)``
@@ -29,7 +40,12 @@ import numpy as np
 from scenes import camera
 from scenes.errors import BadInput
 
-PRESETS = ("box", "envmap")
+__all__ = ["PRESETS", "FORMAT", "FOV_X_DEG", "PITCH_DEG", "CAMERA_HEIGHT", "MAX_DEPTH",
+           "GREY_TEXTURES", "PHOTO_TEXTURES", "WALL_TEXTURES", "FLOOR_TEXTURES",
+           "ENV_PHOTOS", "TOTEM_RADIUS", "TOTEM_IOR", "panel", "sphere_outline",
+           "place_totems", "describe"]
+
+PRESETS = ("box", "envmap", "outdoor", "window", "tabletop")   # the order seeds rngs
 FORMAT = 1
 FOV_X_DEG = 60.0
 PITCH_DEG = 14.0            # camera looks this much below the horizon
@@ -276,23 +292,8 @@ def place_totems(rng, K: np.ndarray, size, n: int, radius: float, ior: float,
 
 # --------------------------------------------------------------------------- public
 
-def describe(preset: str, seed: int, size=(640, 480), n_totems: int = 4,
-             radius: float = TOTEM_RADIUS, ior: float = TOTEM_IOR) -> dict:
-    """A random scene of ``preset`` drawn from ``seed``, as a JSON-ready dict.
-
-    Parameters
-    ----------
-    preset : "box" or "envmap".
-    seed : the random seed; the same seed gives the same description.
-    size : (W, H) in pixels; the 3D scene does not depend on it.
-    n_totems : number of glass spheres (0 allowed: a scene without totems).
-    radius : totem radius in metres.
-    ior : totems' index of refraction.
-
-    Returns
-    -------
-    dict in the format documented in :mod:`scenes.render`.
-    """
+def _check_args(preset, size, n_totems, radius, ior) -> tuple[int, int]:
+    """(W, H) of ``size``, after checking every argument of :func:`describe`."""
     if preset not in PRESETS:
         raise BadInput(f"unknown preset {preset!r}; use one of {', '.join(PRESETS)}")
     try:
@@ -301,12 +302,45 @@ def describe(preset: str, seed: int, size=(640, 480), n_totems: int = 4,
         raise BadInput(f"size must be (width, height) in pixels, got {size!r}") from None
     if not (16 <= W <= 8192 and 16 <= H <= 8192):
         raise BadInput(f"size must be between 16 and 8192 pixels a side, got {W}x{H}")
-    if not (0 <= int(n_totems) <= 8):
+    if n_totems is not None and not (0 <= int(n_totems) <= 8):
         raise BadInput(f"number of totems must be 0..8, got {n_totems}")
-    if not (np.isfinite(radius) and 0.01 <= radius <= 0.3):
+    if radius is not None and not (np.isfinite(radius) and 0.01 <= radius <= 0.3):
         raise BadInput(f"totem radius must be 0.01..0.3 m, got {radius}")
-    if not (np.isfinite(ior) and 1.0 < ior < 4.0):
+    if ior is not None and not (np.isfinite(ior) and 1.0 < ior < 4.0):
         raise BadInput(f"totem ior must lie in (1, 4), got {ior}")
+    return W, H
+
+
+def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = None,
+             radius: float | None = None, ior: float | None = None) -> dict:
+    """A random scene of ``preset`` drawn from ``seed``, as a JSON-ready dict.
+
+    Parameters
+    ----------
+    preset : one of ``PRESETS`` (module docstring).
+    seed : the random seed; the same seed gives the same description.
+    size : (W, H) in pixels; the 3D scene does not depend on it.
+    n_totems : number of glass spheres (0 allowed: a scene without totems); None:
+        the preset's (box, envmap: 4; the others 3-6 drawn per seed, tabletop 3-4).
+    radius : totem radius in metres, all totems; None: the preset's (box, envmap:
+        ``TOTEM_RADIUS``; the others 0.06-0.12 drawn per totem, tabletop 0.06-0.08).
+    ior : totems' index of refraction; None: the preset's (box, envmap:
+        ``TOTEM_IOR``; the others 1.45-1.55 drawn per totem).
+
+    Returns
+    -------
+    dict in the format documented in :mod:`scenes.render`.
+    """
+    W, H = _check_args(preset, size, n_totems, radius, ior)
+    if preset not in ("box", "envmap"):
+        from scenes import preset_outdoor, preset_rooms, preset_tabletop
+        module = {"outdoor": preset_outdoor, "window": preset_rooms,
+                  "tabletop": preset_tabletop}[preset]
+        return module.describe(seed, (W, H), PRESETS.index(preset), n_totems=n_totems,
+                               radius=radius, ior=ior)
+    n_totems = 4 if n_totems is None else n_totems
+    radius = TOTEM_RADIUS if radius is None else radius
+    ior = TOTEM_IOR if ior is None else ior
     rng = np.random.default_rng([int(seed), PRESETS.index(preset)])
     K = camera.intrinsics(W, H, FOV_X_DEG)
     R = _pitch(PITCH_DEG)

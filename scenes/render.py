@@ -5,7 +5,7 @@ the world frame: OpenCV, +x right, +y down, +z forward, metres)::
 
     {
       "format": 1,
-      "preset": "box" | "envmap",   "seed": int,
+      "preset": str,                "seed": int,    # presets.PRESETS
       "size": [W, H],                               # pixels
       "K": 3x3 list,                                # intrinsics, pixel-centre convention
       "fov_x_deg": float,                           # informational; K rules
@@ -29,11 +29,24 @@ the world frame: OpenCV, +x right, +y down, +z forward, metres)::
           "removable": bool       # true for objects standing on the floor
         }, ... ],
       "lights": [ {"id": int, "name": str, "kind": "rectangle", "to_world": 4x4,
-                   "radiance": [r, g, b]} ],        # linear, W/(m^2 sr), front side
+                   "radiance": [r, g, b],           # linear, W/(m^2 sr), front side
+                   "texture": "<name>"}             # optional: radiance x the texture
+                | {"id": int, "name": str, "kind": "directional",   # the sun: no shape
+                   "direction": [x, y, z],          # the way the light travels
+                   "irradiance": [r, g, b]} ],      # linear, W/m^2
       "envmap": null | {"image": "<skimage.data name>", "scale": float,
-                        "to_world": 4x4},           # Mitsuba envmap frame (+y up)
+                        "to_world": 4x4,            # Mitsuba envmap frame (+y up)
+                        "layout": "tiled" | "horizon",   # optional, default tiled
+                        "sky": [[zenith], [horizon]],    # horizon layout: sRGB 0-1
+                        "ground": [r, g, b]},            # horizon layout: sRGB 0-1
+      "object_scale": float,                        # optional (1): size of the objects
+                                                    # a re-rendering edit adds
       "totems": [ {"center": [x, y, z], "radius": m, "ior": n} ]  # left to right
     }
+
+A texture ``"<name>"`` is a ``skimage.data`` image or a procedural ``"<kind>:<seed>"``
+(:mod:`scenes.textures`). The ``tiled`` envmap is :func:`envmap_image` of the photo, the
+``horizon`` one :func:`scenes.textures.horizon_panorama`.
 
 Adding an object = appending a dict of a supported kind (with a new id) to
 ``desc["objects"]``; removing one = ``exclude_ids=(id,)``. Materials are diffuse
@@ -53,6 +66,11 @@ import numpy as np
 from scenes import backend, camera
 from scenes.colour import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
+
+__all__ = ["NOTHING", "TOTEM_ID_BASE", "KINDS", "sampler_type", "totem_id",
+           "texture_image", "envmap_image", "scene_dict", "load_scene", "render",
+           "shape_ids",
+           "totem_masks"]
 
 NOTHING = -1
 TOTEM_ID_BASE = 1000
@@ -75,10 +93,15 @@ def totem_id(j: int) -> int:
 
 @functools.lru_cache(maxsize=None)
 def texture_image(name: str) -> np.ndarray:
-    """``skimage.data.<name>`` as (h, w, 3) uint8 sRGB."""
+    """``skimage.data.<name>`` (or a procedural ``"<kind>:<seed>"``) as (h, w, 3)
+    uint8 sRGB."""
     import skimage.data
     from skimage.color import gray2rgb
 
+    from scenes import textures
+
+    if textures.is_procedural(name):
+        return textures.procedural(name)
     fn = getattr(skimage.data, str(name), None)
     if fn is None or not callable(fn):
         raise BadInput(f"unknown texture {name!r}: use a skimage.data image name")
@@ -91,13 +114,17 @@ def texture_image(name: str) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=None)
-def _bitmap(name: str, kind: str = "texture", tint=(1.0, 1.0, 1.0)):
+def _bitmap(name: str, kind: str = "texture", tint=(1.0, 1.0, 1.0), sky=None):
     """A linear float32 ``mi.Bitmap`` of a texture times a linear ``tint`` (or of a
-    lat-long envmap)."""
-    import mitsuba as mi
+    lat-long envmap: tiled, or with ``sky`` = (zenith, horizon, ground) the horizon
+    panorama)."""
+    mi = backend.modules()[1]
 
     img = texture_image(name)
-    if kind == "envmap":
+    if kind == "envmap" and sky is not None:
+        from scenes.textures import horizon_panorama
+        img = horizon_panorama(img, *sky)
+    elif kind == "envmap":
         img = envmap_image(img)
     lin = srgb_to_linear(img / 255.0) * np.asarray(tint, np.float32)
     return mi.Bitmap(np.ascontiguousarray(lin, dtype=np.float32))
@@ -151,7 +178,7 @@ def _material(m: dict) -> dict:
                "raw": True, "filter_type": "bilinear", "wrap_mode": "repeat"}
         su, sv = (float(s) for s in m.get("uv_scale", [1.0, 1.0]))
         if (su, sv) != (1.0, 1.0):
-            import mitsuba as mi
+            mi = backend.modules()[1]
             tex["to_uv"] = mi.ScalarTransform4f().scale([su, sv, 1.0])
         return {"type": "diffuse", "reflectance": tex}
     rgb = [float(c) for c in m.get("rgb", [0.5, 0.5, 0.5])]
@@ -160,7 +187,7 @@ def _material(m: dict) -> dict:
 
 def _shapes(obj: dict) -> dict:
     """Mitsuba shape dicts (key suffix -> dict) for one object of the description."""
-    import mitsuba as mi
+    mi = backend.modules()[1]
 
     T = mi.ScalarTransform4f(np.asarray(obj["to_world"], float).tolist())
     kind = obj["kind"]
@@ -174,10 +201,38 @@ def _shapes(obj: dict) -> dict:
     return {"": {"type": kind, "to_world": T}}
 
 
+def _radiance(light: dict) -> dict:
+    """An area light's radiance: an RGB value, or a texture times it (linear)."""
+    rgb = [float(c) for c in light["radiance"]]
+    if "texture" not in light:
+        return {"type": "rgb", "value": rgb}
+    return {"type": "bitmap", "bitmap": _bitmap(light["texture"], "texture", tuple(rgb)),
+            "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
+
+
+def _directional(light: dict) -> dict:
+    """Mitsuba's ``directional`` emitter (a sun: parallel light, no shape)."""
+    return {"type": "directional",
+            "direction": [float(c) for c in light["direction"]],
+            "irradiance": {"type": "rgb",
+                           "value": [float(c) for c in light["irradiance"]]}}
+
+
+def _env_bitmap(env: dict):
+    """The envmap's bitmap in its layout (module docstring)."""
+    if env.get("layout", "tiled") == "tiled":
+        return _bitmap(env["image"], "envmap")
+    if env["layout"] != "horizon":
+        raise BadInput(f"unknown envmap layout {env['layout']!r}; use tiled or horizon")
+    zenith, horizon = (tuple(float(c) for c in rgb) for rgb in env["sky"])
+    ground = tuple(float(c) for c in env["ground"])
+    return _bitmap(env["image"], "envmap", sky=(zenith, horizon, ground))
+
+
 def scene_dict(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=(),
                integrator: dict | None = None) -> tuple[dict, dict]:
     """The Mitsuba scene dict of a description, and its shape key -> our id map."""
-    backend.use()
+    mi = backend.modules()[1]
     W, H = _check(desc)
     exclude = {int(i) for i in exclude_ids}
     K = np.asarray(desc["K"], float)
@@ -200,17 +255,17 @@ def scene_dict(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=()
         if int(light["id"]) in exclude:
             continue
         key = f"light{int(light['id'])}"
+        if light.get("kind") == "directional":
+            d[key] = _directional(light)
+            continue
         shape = _shapes(light)[""]
         shape["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}}
-        shape["emitter"] = {"type": "area",
-                            "radiance": {"type": "rgb",
-                                         "value": [float(c) for c in light["radiance"]]}}
+        shape["emitter"] = {"type": "area", "radiance": _radiance(light)}
         d[key] = shape
         ids[key] = int(light["id"])
     env = desc.get("envmap")
     if env:
-        import mitsuba as mi
-        d["envmap"] = {"type": "envmap", "bitmap": _bitmap(env["image"], "envmap"),
+        d["envmap"] = {"type": "envmap", "bitmap": _env_bitmap(env),
                        "scale": float(env.get("scale", 1.0)),
                        "to_world": mi.ScalarTransform4f(
                            np.asarray(env["to_world"], float).tolist())}
@@ -227,8 +282,33 @@ def scene_dict(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=()
 
 # --------------------------------------------------------------------------- public
 
+def _light_order(scene) -> list:
+    """Keys of the scene's emitters that are shapes (``light<id>``), in its order."""
+    return [str(e.get_shape().id()) for e in scene.emitters() if e.get_shape()]
+
+
+def load_scene(d: dict, tries: int = 64):
+    """``mi.load_dict(d)`` with its area lights in a fixed order (descending id).
+
+    Mitsuba (3.9) lists a scene's area lights in an order that changes from load to
+    load, and its path tracer picks the light to sample by that index: with two lights
+    or more the same sampler seed gave different noise (box seeds 4 and 5, whose
+    re-rendering edits then composited another noise). Loads again until the order
+    is descending by id (each load is a fresh shuffle; two lights: 1/2 each time), the
+    order the standard set's box seeds 4 and 5 were rendered in (their image.png again).
+    """
+    mi = backend.modules()[1]
+    want = sorted((k for k in d if k.startswith("light") and "emitter" in d[k]),
+                  key=lambda k: -int(k[5:]))
+    for _ in range(tries):
+        scene = mi.load_dict(d)
+        if _light_order(scene) == want:
+            return scene
+    raise RuntimeError(f"Mitsuba kept the lights {want} out of order in {tries} loads")
+
+
 def render(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=(),
-           seed: int = 0) -> np.ndarray:
+           seed: int = 0, linear: bool = False) -> np.ndarray:
     """Path-trace the camera view of ``desc``.
 
     Parameters
@@ -238,19 +318,21 @@ def render(desc: dict, *, spp: int = 64, totems: bool = True, exclude_ids=(),
     totems : draw the totems (False gives the clean view).
     exclude_ids : object or light ids left out (e.g. a removed object).
     seed : the sampler's seed (the same seed gives the same noise).
+    linear : return the linear radiance as rendered (not clipped), for a camera model
+        to act on before the tone curve.
 
     Returns
     -------
-    (H, W, 3) float32 sRGB in [0, 1] (clipped, no tone mapping).
+    (H, W, 3) float32 sRGB in [0, 1] (clipped, no tone mapping); linear with ``linear``.
     """
-    backend.use()
-    import mitsuba as mi
-
+    mi = backend.modules()[1]
     if int(spp) < 1:
         raise BadInput(f"samples per pixel must be >= 1, got {spp}")
     d, _ = scene_dict(desc, spp=spp, totems=totems, exclude_ids=exclude_ids)
-    scene = mi.load_dict(d)
+    scene = load_scene(d)
     img = mi.render(scene, spp=int(spp), seed=int(seed))
+    if linear:
+        return np.array(img, dtype=np.float32)[..., :3]
     return linear_to_srgb(np.array(img)[..., :3])
 
 
@@ -260,10 +342,7 @@ def shape_ids(desc: dict, *, totems: bool = True, exclude_ids=()) -> np.ndarray:
     The rays are the Mitsuba sensor's own (``sample_ray`` at the film position of
     pixel centre (u, v) of ``K``). Ids as in the module docstring.
     """
-    backend.use()
-    import drjit as dr
-    import mitsuba as mi
-
+    dr, mi = backend.modules()
     W, H = _check(desc)
     d, ids = scene_dict(desc, spp=1, totems=totems, exclude_ids=exclude_ids)
     scene = mi.load_dict(d)

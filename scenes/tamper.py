@@ -25,7 +25,8 @@ are never changed, except by ``shift``, whose totem edits are listed in ``tamper
 and drawn in ``truth/tamper_totem_mask.png``.
 
 Images are handled as the 8-bit sRGB values of the file, so pixels outside the mask
-are the source's bit for bit.
+are the source's bit for bit. The copy's photo is always ``image.png``, also for a
+source with ``image.jpg``: a forger re-saves the decoded pixels (losslessly here).
 
 This module holds the verb (:func:`tamper`, :func:`parse_region`, the table of kinds,
 the writing of the copy) and the 2D editors. The re-rendering editors are in
@@ -94,7 +95,7 @@ def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
     if region is not None and kind in ("shift", "insert"):
         raise BadInput(f"a region applies to color, splice, inpaint and remove, "
                        f"not to {kind}")
-    image = _read_uint8(scene_dir / "image.png")
+    image = _read_uint8(folder.photo_path(scene_dir))
     totems = scene.masks.any(axis=0)
     src = Source(scene_dir, image, scene, truth, totems,
                  parse_region(region, image.shape[:2], totems))
@@ -252,16 +253,9 @@ def _copy_files(src_dir: Path) -> dict[str, bytes]:
     """The scene folder's files of the contract, by relative path, as bytes."""
     files = {"calib.npy": folder.find_calib(src_dir).read_bytes(),
              "totems.json": (src_dir / "totems.json").read_bytes()}
-    for p in sorted((src_dir / "totem_masks").glob("*.png")):
-        files[f"totem_masks/{p.name}"] = p.read_bytes()
     if (src_dir / "initial_totem_pose.npy").is_file():
         files["initial_totem_pose.npy"] = (src_dir / "initial_totem_pose.npy").read_bytes()
-    t = src_dir / "truth"
-    if t.is_dir():
-        for p in sorted(t.iterdir()):
-            if p.is_file() and not p.name.startswith("."):
-                files[f"truth/{p.name}"] = p.read_bytes()
-    return files
+    return {**files, **folder.read_parts(src_dir)}
 
 
 def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
@@ -281,7 +275,7 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
     record = {"format": FORMAT, **edit.record,
               "source": {"folder": src.path.name,
                          "image_sha256": hashlib.sha256(
-                             (src.path / "image.png").read_bytes()).hexdigest()},
+                             folder.photo_path(src.path).read_bytes()).hexdigest()},
               "changed_pixels": int(mask.sum()),
               "changed_fraction": round(float(mask.sum()) / (H * W), 6),
               "bbox": list(edits2d.bbox(mask)),

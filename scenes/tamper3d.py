@@ -106,10 +106,10 @@ def edit_remove(src: Source, rng) -> Edit:
 # --------------------------------------------------------------------------- insert
 
 def floor_plane(desc: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The floor (object "floor" or "ground"): a point on it, its upward unit normal
-    and its ``to_world`` (camera frame, metres)."""
+    """The floor (object "floor", "ground" or "table"): a point on it, its upward unit
+    normal and its ``to_world`` (camera frame, metres)."""
     for o in desc["objects"]:
-        if o.get("name") in ("floor", "ground") and o.get("kind") == "rectangle":
+        if o.get("name") in ("floor", "ground", "table") and o.get("kind") == "rectangle":
             M = np.asarray(o["to_world"], float)
             n = M[:3, 2] / np.linalg.norm(M[:3, 2])
             return M[:3, 3], n, M
@@ -132,8 +132,10 @@ def new_object(desc: dict, rng, base: np.ndarray, up: np.ndarray, along: np.ndar
     """A random box, sphere or cylinder standing on the floor at ``base``.
 
     ``up`` is the floor's unit normal, ``along`` a unit vector in the floor plane.
-    The rotation is proper (det +1) so Mitsuba's shapes keep outward normals.
+    The rotation is proper (det +1) so Mitsuba's shapes keep outward normals. Sizes
+    are scaled by the description's ``object_scale`` (1 when absent).
     """
+    s = float(desc.get("object_scale", 1.0))
     t = rng.uniform(0.0, 2 * np.pi)
     side = np.cross(up, along)
     e1 = np.cos(t) * along + np.sin(t) * side
@@ -141,12 +143,13 @@ def new_object(desc: dict, rng, base: np.ndarray, up: np.ndarray, along: np.ndar
     kind = str(rng.choice(["cube", "sphere", "cylinder"]))
     if kind == "cube":
         w, d, h = rng.uniform(0.25, 0.45), rng.uniform(0.25, 0.45), rng.uniform(0.3, 0.6)
+        w, d, h = s * w, s * d, s * h
         L, t0 = Q @ np.diag([w / 2, d / 2, h / 2]), base + up * h / 2
     elif kind == "sphere":
-        r = rng.uniform(0.15, 0.25)
+        r = s * rng.uniform(0.15, 0.25)
         L, t0 = Q * r, base + up * r
     else:
-        r, h = rng.uniform(0.1, 0.2), rng.uniform(0.35, 0.7)
+        r, h = s * rng.uniform(0.1, 0.2), s * rng.uniform(0.35, 0.7)
         L, t0 = Q @ np.diag([r, r, h]), base
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = L, t0

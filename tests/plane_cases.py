@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from inverse.sphere import totem_rays
 from scenes import backend, camera
 
-backend.use()
-
-import mitsuba as mi  # noqa: E402
-
-from inverse.sphere import totem_rays  # noqa: E402
+mi = backend.modules()[1]
 
 W, H = 240, 180
 K = camera.intrinsics(W, H, 60.0)

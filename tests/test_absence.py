@@ -9,6 +9,7 @@ import pytest
 
 from scenes.camera import pixel_rays
 from inverse.grid import frame_for_scene
+from inverse.rays import TotemRays
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 from scenes.colour import srgb_to_linear
 from verify.absence import absence, in_view, line_absence
@@ -44,7 +45,7 @@ def rays():
     col = col.copy()
     col[on_card(X[:, 0], X[:, 1])] = RED
     frame = frame_for_scene(K, (W, H), CENTERS, np.full(4, RADIUS))
-    return o, d, srgb_to_linear(col), js, np.ones(len(js)), frame
+    return TotemRays(o, d, srgb_to_linear(col), js, np.ones(len(js))), frame
 
 
 def card_pixels():
@@ -113,8 +114,7 @@ def test_what_lies_behind_the_fitted_surface_is_not_judged(rays):
 
 
 def test_two_totems_cannot_tell(rays):
-    o, d, radiance, js, cos_in, frame = rays
-    two = js < 2
-    A = absence(o[two], d[two], radiance[two], js[two], cos_in[two], frame,
-                camera_view(False), np.zeros((H, W), bool), K, None, cell_px=CELL)
+    totem_rays, frame = rays
+    A = absence(totem_rays.select(totem_rays.totem < 2), frame, camera_view(False),
+                np.zeros((H, W), bool), K, None, cell_px=CELL)
     assert np.isnan(A).all()

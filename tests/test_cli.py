@@ -4,7 +4,6 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
 
 from scenes import folder
 
@@ -86,3 +85,26 @@ def test_inputs_untouched_on_error(tmp_path):
     before = sorted(p.relative_to(scene) for p in scene.rglob("*"))
     assert_one_line_error(totems("check", scene))
     assert sorted(p.relative_to(scene) for p in scene.rglob("*")) == before
+
+
+def test_the_summary_line_names_what_the_verb_wrote(capsys):
+    """crosscheck once said 'wrote SCENE' where it wrote OUT/crosscheck."""
+    from verify.cli import _print_summary
+
+    _print_summary("crosscheck", {"scene": "S", "crosscheck": "OUT/crosscheck"})
+    _print_summary("fit", {"fit": "OUT/fit"})
+    _print_summary("tamper", {"scene": "COPY", "kind": "color"})
+    assert capsys.readouterr().out.splitlines() == [
+        "crosscheck: wrote OUT/crosscheck", "fit: wrote OUT/fit", "tamper: wrote COPY"]
+
+
+def test_a_crash_is_not_a_verdict(monkeypatch, capsys):
+    """An unexpected error exits 70 (a bug), never 1 (inconsistent)."""
+    from verify import cli
+
+    def boom(args):
+        raise ZeroDivisionError("boom")
+
+    monkeypatch.setattr(cli, "cmd_fit", boom)
+    assert cli.main(["fit", "nowhere"]) == cli.EXIT_BUG
+    assert "internal error" in capsys.readouterr().err

@@ -9,6 +9,7 @@ import pytest
 
 from scenes.camera import pixel_rays
 from inverse.grid import frame_for_scene
+from inverse.rays import TotemRays
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 from scenes.colour import srgb_to_linear
 from verify.corroborate import cell_errors, corroboration, unseen
@@ -30,8 +31,7 @@ def camera_view(z_plane):
 def plane():
     o, d, js, col = rays_onto_plane(Z_PLANE)
     frame = frame_for_scene(K, (W, H), CENTERS, np.full(4, RADIUS))
-    cos_in = np.ones(len(js))
-    return o, d, srgb_to_linear(col), js, cos_in, frame
+    return TotemRays(o, d, srgb_to_linear(col), js, np.ones(len(js))), frame
 
 
 def centre(E):

@@ -1,11 +1,16 @@
 """scenes/detect_masks: glass-sphere silhouettes found to IoU >= 0.95; none in a wall."""
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from scenes import folder
 from scenes.detect_masks import propose_masks, write_masks
 from scenes.errors import BadInput
+from verify.cli import EXIT_INCOMPLETE
 
 
 def _photo(seed, n=3, totems=True, W=320, H=240):
@@ -72,12 +77,12 @@ def test_write_masks_keeps_hand_drawn(tmp_path):
 def test_cone_points_are_tangent_to_the_sphere():
     # A sphere of radius R at P (camera frame, metres): every ray through the cone's
     # image points passes at distance R from P, and the normals point away from P's image.
-    from scenes.detect_masks import _cone_points
+    from scenes.silhouette import cone_points
     K = np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]])
     P, R = np.array([0.4, 0.3, 1.5]), 0.05
     p = K @ P
     q = (p[0] / p[2], p[1] / p[2], K[0, 0] * np.tan(np.arcsin(R / np.linalg.norm(P))))
-    pts, nrm = _cone_points(q, K, 64)
+    pts, nrm = cone_points(q, K, 64)
     rays = np.linalg.solve(K, np.c_[pts, np.ones(len(pts))].T).T
     rays /= np.linalg.norm(rays, axis=1, keepdims=True)
     dist = np.linalg.norm(P - (rays @ P)[:, None] * rays, axis=1)
@@ -125,3 +130,45 @@ def test_rendered_view_without_totems_is_bad_input(envmap_scene):
     _, _, clean, _ = envmap_scene               # same scene and floor, no glass spheres
     with pytest.raises(BadInput, match="no totem found"):
         propose_masks(clean)
+
+
+def _folder_with_key(tmp_path, img, n_key):
+    folder.write_image(tmp_path / "image.png", img)
+    (tmp_path / "totems.json").write_text(
+        json.dumps([{"radius": 0.1, "ior": 1.5}] * n_key))
+    return tmp_path
+
+
+@pytest.mark.slow
+def test_masks_says_so_when_the_key_lists_more_totems_than_it_finds(tmp_path):
+    img, truth = _photo(1, n=4)
+    scene = _folder_with_key(tmp_path / "s", img, 5)
+    done = subprocess.run([sys.executable, "-m", "verify.cli", "masks", str(scene)],
+                          capture_output=True, text=True)
+    assert done.returncode == EXIT_INCOMPLETE, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "found 4 of the 5 totems" in lines[0]
+    assert "radii" in lines[0] and "--hint" in lines[0]
+    assert not (scene / "totem_masks").exists()          # never fewer masks silently
+    assert (scene / "totem_masks_check.png").is_file()
+
+
+@pytest.mark.slow
+def test_hints_find_each_totem_and_the_key_sets_the_count(tmp_path):
+    img, truth = _photo(1, n=4)
+    scene = _folder_with_key(tmp_path / "s", img, 4)
+    hints = [(np.nonzero(m)[1].mean(), np.nonzero(m)[0].mean()) for m in truth]
+    out = write_masks(scene, hints=hints)
+    assert out["complete"] and out["n"] == 4
+    masks = np.stack([folder.read_mask(p) for p in out["masks"]])
+    iou = (masks & truth).sum((1, 2)) / (masks | truth).sum((1, 2))
+    assert np.all(iou >= 0.95), iou
+    # the key alone sets how many are wanted: all four found, in order
+    out2 = write_masks(_folder_with_key(tmp_path / "t", img, 4))
+    assert out2["complete"] and out2["n"] == 4
+
+
+def test_a_hint_outside_the_photo_is_bad_input(tmp_path):
+    img, _ = _photo(0, n=2)
+    with pytest.raises(BadInput, match="outside"):
+        write_masks(_folder_with_key(tmp_path, img, 2), hints=[(-5.0, 10.0)])

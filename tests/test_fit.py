@@ -14,10 +14,7 @@ from scenes import colour, render
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from scenes.errors import BadInput
 
-backend.use()
-
-import drjit as dr  # noqa: E402
-import mitsuba as mi  # noqa: E402
+dr, mi = backend.modules()
 
 W, H = 80, 60
 K = camera.intrinsics(W, H, 60.0)
@@ -161,17 +158,16 @@ def test_totem_centre_gradient_matches_finite_differences():
 
 def test_camera_columns_through_mitsuba_render():
     """The registered integrator renders the grid like render_view does (no totems)."""
-    from inverse import fit
+    from inverse import view
     from inverse.integrator import TotemGridIntegrator
 
     loaded = mi.load_dict({"type": "totem_grid", "n_samples": 8})
     assert isinstance(loaded, TotemGridIntegrator) and loaded.n_samples == 8
     itg, frame, *_ = _integrator(seed=5)
-    itg.totems = False
     scene = mi.load_dict({"type": "scene",
                           "sensor": camera.mitsuba_sensor(K, W, H, spp=4)})
     img = np.asarray(mi.render(scene, integrator=itg, spp=4))
-    recon, depth = fit.render_view(itg, frame, (W, H), n=32)
+    recon, depth = view.render_view(itg, frame, (W, H), n=32)
     lin = colour.srgb_to_linear(recon)
     # Pixel footprints differ (random sub-pixel positions), so compare means/edges.
     assert np.abs(img - lin).mean() < 0.02
@@ -182,7 +178,7 @@ def test_camera_columns_through_mitsuba_render():
 
 @pytest.fixture(scope="module")
 def small_scene(tmp_path_factory):
-    from scenes import folder, presets, render
+    from scenes import folder, presets
 
     desc = presets.describe("box", 3, size=(160, 120), n_totems=4)
     image = render.render(desc, spp=16)
@@ -197,7 +193,7 @@ def small_scene(tmp_path_factory):
 
 @pytest.mark.slow
 def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path):
-    from inverse import fit
+    from inverse import fit, fit_files, view
 
     scene, truth = small_scene
     init = truth.copy()
@@ -222,12 +218,12 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.abs(r.totem_pred[m] - obs).mean() < np.abs(obs.mean(0) - obs).mean()
 
     # write_fit / load_fit round trip, and re-rendering from the saved grid.
-    fit.write_fit(r, tmp_path / "fit", scene=scene)
-    back = fit.load_fit(tmp_path / "fit")
+    fit_files.write_fit(r, tmp_path / "fit", scene=scene)
+    back = fit_files.load_fit(tmp_path / "fit")
     assert np.allclose(back.centers, r.centers) and np.allclose(back.initial, r.initial)
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
-    assert back.scene_fingerprint == fit.scene_fingerprint(scene)
+    assert back.scene_fingerprint == fit_files.scene_fingerprint(scene)
     # The fitted colour the glass reflects is kept: linear RGB, non-negative.
     assert back.ambient == r.ambient and len(r.ambient) == 3
     assert min(r.ambient) >= 0.0 and max(r.ambient) > 0.0
@@ -252,30 +248,30 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     grid_only = fit.fit_scene(scene, settings=dataclasses.replace(st, stereo=False),
                               fixed_pose=True)
     assert grid_only.geometry["chosen"] == "grid"
-    recon2, _ = fit.render_grid(grid_only.grid, scene.size, n=32)
+    recon2, _ = view.render_grid(grid_only.grid, scene.size, n=32)
     assert np.abs(recon2 - grid_only.recon).max() < 1e-3
     # The fingerprint follows what the fit reads: the totem pixels and the key.
     outside = scene.image.copy()
     outside[~scene.masks.any(0)] = 0.5
-    assert fit.scene_fingerprint(dataclasses.replace(scene, image=outside)) \
+    assert fit_files.scene_fingerprint(dataclasses.replace(scene, image=outside)) \
         == back.scene_fingerprint
-    assert fit.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
+    assert fit_files.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
         != back.scene_fingerprint
-    assert fit.scene_fingerprint(dataclasses.replace(scene, ior=scene.ior + 0.01)) \
+    assert fit_files.scene_fingerprint(dataclasses.replace(scene, ior=scene.ior + 0.01)) \
         != back.scene_fingerprint
 
 
 def test_load_fit_refuses_missing_or_corrupt(tmp_path):
-    from inverse import fit
+    from inverse import fit_files
 
     with pytest.raises(BadInput):
-        fit.load_fit(tmp_path / "nothing")
+        fit_files.load_fit(tmp_path / "nothing")
     d = tmp_path / "fit"
     d.mkdir()
-    for name in fit.FIT_FILES:
+    for name in fit_files.FIT_FILES:
         (d / name).write_bytes(b"garbage")
     with pytest.raises(BadInput):
-        fit.load_fit(d)
+        fit_files.load_fit(d)
 
 
 def test_bad_input(small_scene):

@@ -4,10 +4,9 @@ and descent from a perturbed centre."""
 import numpy as np
 
 from inverse import outline, pose
-from scenes import camera
+from scenes import backend, camera
 
-import drjit as dr  # after inverse.outline, which calls backend.use()
-import mitsuba as mi
+dr, mi = backend.modules()
 
 W, H = 320, 240
 K = camera.intrinsics(W, H, 60.0)

@@ -116,8 +116,8 @@ def test_outline_rays_are_tangent_to_the_sphere():
 def test_mitsuba_sphere_mask():
     """Mask from Mitsuba's own ray/sphere intersection of the contract's pixel rays."""
     from scenes import backend
-    backend.use()
-    import mitsuba as mi
+
+    mi = backend.modules()[1]
 
     P, R = np.array([-0.45, 0.25, 1.6]), 0.1
     scene = mi.load_dict({"type": "scene",

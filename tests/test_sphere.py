@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from inverse import sphere
+from scenes import backend
 
-import drjit as dr  # noqa: E402  (sphere chose the variant)
-import mitsuba as mi  # noqa: E402
+dr, mi = backend.modules()
 
 
 # ----------------------------------------------------------------- numpy twin (f64)
@@ -234,7 +234,7 @@ def test_invalid_rays_flagged():
     t0, _ = np_intersect(np.zeros((5, 3)), dirs, np.array([[0, 0, 1.0]]), np.full(5, R))
     Dn = t0[:, None] * dirs
     cos_i = -np.sum(dirs * (Dn - [0, 0, 1.0]) / R, 1)
-    assert cos_i[3] < sphere.COS_MIN < cos_i[4]
+    assert cos_i[3] < sphere.COS_VALID < cos_i[4]
     assert np.array(valid).tolist() == [True, False, False, False, True]
     T = np.array(T)
     assert T[0] > 0.8 and (T[1:4] == 0).all()
@@ -245,7 +245,7 @@ def test_invalid_rays_flagged():
     _, _, _, v_in = sphere.totem_rays(mi.Point3f(0, 0, 0.95), vec(dirs[:1]), P, R, eta)
     assert not np.array(v_in).any()
     # A stricter threshold drops the cos ~ 0.25 ray.
-    _, _, _, v = sphere.totem_rays(mi.Point3f(0, 0, 0), vec(dirs), P, R, eta, cos_min=0.3)
+    _, _, _, v = sphere.totem_rays(mi.Point3f(0, 0, 0), vec(dirs), P, R, eta, cos_valid=0.3)
     assert not np.array(v)[4]
 
 

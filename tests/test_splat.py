@@ -8,6 +8,7 @@ import numpy as np
 
 from scenes import camera
 from inverse.grid import frame_for_scene
+from inverse.rays import TotemRays
 from inverse.splat import holdout_error, splat_image, surface_hits
 from inverse.view import choose_view, stereo_weight
 from inverse.sweep import slice_depths
@@ -72,8 +73,9 @@ def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
     lin = col ** 2.2                     # any radiance; the view is compared in display
     wrong = np.full((30, 40), FRAME.far)             # a far backdrop, as fits settle
     flat = np.full((H, W, 3), 0.5, np.float32)       # and a grey view from it
-    view = choose_view(o, d, lin, js, cos_in, FRAME, wrong, flat, np.zeros((0, 3)),
-                       (W, H), res=(45, 60), far_biases=(0.0,))
+    rays = TotemRays(o, d, lin, js, cos_in)
+    view = choose_view(rays, FRAME, wrong, flat, np.zeros((0, 3)), (W, H), res=(45, 60),
+                       far_biases=(0.0,))
     assert view.chosen == "stereo" and view.stereo_share > 0.5
     assert view.holdout["stereo"] < view.holdout["grid"]
     # Where the totems see the plane, the splatted view is the plane's texture.
@@ -90,8 +92,8 @@ def test_stereo_replaces_a_wrong_grid_geometry_and_rebuilds_the_view():
     # Its points lie on the plane.
     assert np.median(np.abs(view.points[:, 2] - z_plane)) < 0.1
     # A right grid geometry is kept.
-    kept = choose_view(o, d, lin, js, cos_in, FRAME, np.full((30, 40), z_plane), flat,
-                       np.zeros((0, 3)), (W, H), res=(45, 60), far_biases=(0.0,))
+    kept = choose_view(rays, FRAME, np.full((30, 40), z_plane), flat, np.zeros((0, 3)),
+                       (W, H), res=(45, 60), far_biases=(0.0,))
     assert kept.holdout["grid"] <= 1.05 * kept.holdout["stereo"]
 
 
@@ -110,8 +112,8 @@ def test_each_pixel_takes_the_geometry_whose_held_out_rays_erred_less_nearby():
     grid_depth[:, int(s_cut * 40):] = FRAME.far
     grid_view = truth.copy()
     grid_view[:, int(0.55 * W):] = 0.5
-    view = choose_view(o, d, lin, js, np.ones(len(o)), FRAME, grid_depth, grid_view,
-                       np.zeros((0, 3)), (W, H), res=(45, 60), far_biases=(0.0,))
+    view = choose_view(TotemRays(o, d, lin, js, np.ones(len(o))), FRAME, grid_depth,
+                       grid_view, np.zeros((0, 3)), (W, H), res=(45, 60), far_biases=(0.0,))
     rows = slice(int(0.35 * H), int(0.6 * H))
     right = (rows, slice(int(0.62 * W), int(0.7 * W)))
     left = (rows, slice(int(0.3 * W), int(0.48 * W)))
@@ -155,7 +157,7 @@ def test_stereo_must_beat_the_grid_by_the_margin():
     z_plane = 3.0
     o, d, js, col = rays_onto_plane(z_plane)
     flat = np.full((H, W, 3), 0.5, np.float32)
-    view = choose_view(o, d, col ** 2.2, js, np.ones(len(o)), FRAME,
+    view = choose_view(TotemRays(o, d, col ** 2.2, js, np.ones(len(o))), FRAME,
                        np.full((30, 40), z_plane), flat, np.zeros((0, 3)), (W, H),
                        res=(45, 60), far_biases=(0.0,), margin=0.8)
     assert view.chosen == "grid"

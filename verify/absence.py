@@ -28,45 +28,14 @@ see the missing thing do, at the depth where their rays cross. So per camera cel
 "In front of the surface": at most ``BEHIND_SLICES`` slices behind the fit's depth at
 ``c`` (``FitResult.recon_depth``). Behind it lie points the totems see around an
 object's side and the camera does not (it sees the object), which would read as
-missing; a removed object was in front of what the photo now shows. ``A`` is NaN where
-no slice has three totems landing.
+missing; a removed object was in front of what the photo now shows (see
+docs/decisions.md, 'ABSENT: only in front of the surface'). ``A`` is NaN where no slice
+has three totems landing.
 
-Measured on the standard set's fits (640 x 480, box and envmap seeds 1-5, 2026-12-01;
-each variant's threshold by the held-out rule, ``verify.verdict.ABSENT_THRESHOLD``),
-patch AP inpaint / remove and the edits only ABSENT flags:
-
-- three totems (this): 0.635 / 0.510; inpaintings on box seed 5, envmap seeds 2 and 3;
-- two totems: 0.469 / 0.375; the two envmap inpaintings;
-- four: 0.623 / 0.449; box seed 5's and envmap seed 2's;
-- UNSEEN for comparison: 0.343 / 0.360.
-
-Also tried and not adopted (four edits flagged by ABSENT alone, as above, unless said):
-
-- rays down to incidence cosine 0.5 instead of 0.3: 0.614 / 0.553;
-- the photo blurred by 5 px instead of 3: 0.620 / 0.550;
-- 6 slices' tolerance behind the surface instead of 3: no change;
-- each ray's line searched only up to where it passes behind the fitted surface (with
-  two totems): 0.515 / 0.395, but an untouched score rose to 0.109 (envmap seed 18):
-  none flagged;
-- the grey level added to the distance (weight 1 or 0.5), since many removed objects
-  differ from what replaced them in brightness more than in hue (box seeds 3 and 5:
-  grey and dark green on a lighter floor): 0.595 / 0.525 and 0.647 / 0.568, but the
-  rays' brightness (Fresnel and reflection undone only roughly) raised the held-out
-  untouched scores to 0.074 and 0.050: 1 and 2 edits flagged; nor with the rays' grey
-  level first mapped onto the photo's by a per-scene fit (2026-12-02), from each ray's
-  best hue match on its line over the better half of the rays: a gain (median ratio)
-  or a line (trimmed least squares). The held-out untouched scores rose to 0.104 and
-  0.070 (weight 1), the patch AP fell to 0.513 / 0.462 and 0.589 / 0.411, and no edit
-  is flagged (weight 0.5: 0.591 / 0.422, 2 flagged) against 5 by hue alone;
-- rays darker than sRGB 0.1 / 0.15 / 0.2 (mean of the channels) left out, since in the
-  dark what the glass reflects outweighs the hue: 5 / 9 / 9 edits flagged, but with
-  0.15 and 0.2 an untouched photo of the standard set is too (envmap seed 5 or 1, 0.026
-  against a held-out threshold of 0.021): 16 held-out scenes do not bound so low a
-  threshold. At 0.1 the gain (box seed 2's inpainting) is one edit; not adopted.
-
-Without the in-front rule (two totems) the held-out untouched scores reached 0.093 (box
-seed 17, where the totems see a ball the camera sees only the edge of), as high as any
-removal's.
+Three totems, the whole line and hue alone: no variant tried (two or four totems, fewer
+rim rays, more blur, a shorter line, the grey level, no dark rays) flagged more than one
+further edit without flagging an untouched photo too (see docs/decisions.md, 'ABSENT:
+three totems, not two', and the ABSENT entries above it).
 
 Limits: a removed object whose hue appears elsewhere along the totems' lines of sight
 (the grass of the box scenes, a second object of the same colour) is not missed;
@@ -87,11 +56,15 @@ import numpy as np
 from scipy import ndimage
 
 from scenes.camera import project
-from inverse.grid import FrustumFrame
+from inverse.grid import FrustumFrame, cells_to_pixels
+from inverse.rays import TotemRays
 from inverse.sweep import slice_colours
 from scenes.colour import linear_to_srgb
 from verify import corroborate
 from verify.patches import chroma
+
+__all__ = ["SIGMA_PX", "STEP_PX", "MAX_SAMPLES", "BEHIND_SLICES", "MIN_TOTEMS",
+           "line_absence", "in_view", "absence"]
 
 SIGMA_PX = 3.0
 """Gaussian sigma (pixels) of the photo's chroma before it is read along the lines: the
@@ -163,18 +136,19 @@ def in_view(d, K, size) -> np.ndarray:
     return ok & (u >= -0.5) & (u <= W - 0.5) & (v >= -0.5) & (v <= H - 0.5)
 
 
-def absence(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, totem_mask, K,
-            depth, *, sigma_px: float = SIGMA_PX, behind_slices: float = BEHIND_SLICES,
+def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *,
+            sigma_px: float = SIGMA_PX, behind_slices: float = BEHIND_SLICES,
             cell_px: float = corroborate.CELL_PX, n_slices: int = corroborate.N_SLICES,
-            sigma: float = corroborate.SIGMA_CELLS, cos_min: float = corroborate.COS_MIN,
+            sigma: float = corroborate.SIGMA_CELLS,
+            cos_evidence: float = corroborate.COS_EVIDENCE,
             min_totems: int = MIN_TOTEMS) -> np.ndarray:
     """``A`` per photo pixel (see the module docstring).
 
     Parameters
     ----------
-    o, d, radiance, totem, cos_in : the totem rays (``inverse.fit.TotemRays``): exit
-        points (metres) and unit directions, camera frame; linear RGB; totem index;
-        incidence cosine.
+    rays : the totem pixels' rays leaving the glass (:class:`inverse.rays.TotemRays`);
+        those entering their sphere at an incidence cosine below ``cos_evidence``, or
+        whose vanishing point is outside the photo, are not used.
     frame : the fit's frustum frame (the cells and slices of CORROB's map).
     image : (H, W, 3) the photo, sRGB [0, 1].
     totem_mask : (H, W) bool, the totems' pixels (never read).
@@ -189,12 +163,11 @@ def absence(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, totem_mas
     image = np.asarray(image, np.float64)
     H, W = image.shape[:2]
     K = np.asarray(K, np.float64)
-    d = np.asarray(d, np.float64)
-    keep = (np.asarray(cos_in) >= cos_min) & in_view(d, K, (W, H))
-    o, d, totem = np.asarray(o, np.float64)[keep], d[keep], np.asarray(totem)[keep]
-    if len(np.unique(totem)) < min_totems:
+    rays = rays.select((rays.cos_in >= cos_evidence) & in_view(rays.d, K, (W, H)))
+    o, d, totem = rays.o, rays.d, rays.totem
+    if rays.n_totems() < min_totems:
         return np.full((H, W), np.nan)
-    colour = linear_to_srgb(np.clip(np.asarray(radiance, np.float64)[keep], 0.0, 1.0))
+    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
     blurred = ndimage.gaussian_filter(image, (sigma_px, sigma_px, 0))
     a = line_absence(o, d, colour, blurred, ~np.asarray(totem_mask, bool), K)
     ok = np.isfinite(a)
@@ -215,5 +188,4 @@ def absence(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, totem_mas
         per = np.where(behind[None], -np.inf, per)
     kth = -np.sort(-per, axis=0)[min_totems - 1]               # (nk, nt, ns)
     cells = kth.max(axis=0)
-    return corroborate.to_pixels(np.where(np.isfinite(cells), cells, np.nan), frame,
-                                 (W, H))
+    return cells_to_pixels(np.where(np.isfinite(cells), cells, np.nan), frame, (W, H))

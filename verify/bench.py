@@ -5,7 +5,7 @@ even by a crash of the backend, is recorded as failed and the others go on. Unto
 synthetic scenes are also fitted with the initial pose kept fixed and with the true pose
 (oracle), which gives the three rows of the paper's Table 1.
 
-A fit reads only the totem pixels, masks, camera and key (``inverse.fit.scene_fingerprint``):
+A fit reads only the totem pixels, masks, camera and key (``inverse.fit_files.scene_fingerprint``):
 scenes that share them (a photo and its copies edited outside the totems) are fitted once,
 by the untouched one, and the others run ``totems verify --fit`` on that fit. The
 manipulations that leave the totems alone (colour, splice, inpaint, remove, insert) then
@@ -34,6 +34,11 @@ from scenes.errors import BadInput
 from verify.patches import METRICS
 from verify.verdict import THRESHOLDS
 
+__all__ = ["PAPER_TABLE1", "PAPER_TABLE2", "PAPER_TOTEMS", "MODES", "find_scenes",
+           "describe_scene", "modes_for", "fingerprint", "plan", "run_check",
+           "run_bench", "summarise", "markdown", "CSV_FIELDS", "csv_text",
+           "write_outputs", "write_plots"]
+
 # The paper's figures (Tables 1 and 2 of the main text; supplementary for the totem study).
 PAPER_TABLE1 = {  # preset -> mode -> (recon L1, pose L1 in metres)
     "box": {"initial": (0.057, 0.008), "joint": (0.054, 0.108), "oracle": (0.047, None)},
@@ -47,17 +52,20 @@ MODES = {"joint": [], "initial": ["--fixed-pose"], "oracle": ["--oracle-pose"]}
 
 
 def find_scenes(roots) -> list[Path]:
-    """Scene folders (with image.png and totem_masks/) at or below ``roots``, sorted."""
+    """Scene folders (with a photo, image.png or image.jpg, and totem_masks/) at or
+    below ``roots``, sorted."""
     found = set()
     for root in map(Path, roots):
         if not root.exists():
             raise BadInput(f"no such folder: {root}")
-        for img in [root / "image.png", *root.rglob("image.png")]:
-            d = img.parent
-            if img.is_file() and (d / "totem_masks").is_dir() and "totems-out" not in d.parts:
-                found.add(d.resolve())
+        for name in folder.PHOTO_NAMES:
+            for img in [root / name, *root.rglob(name)]:
+                d = img.parent
+                if img.is_file() and (d / "totem_masks").is_dir() \
+                        and "totems-out" not in d.parts:
+                    found.add(d.resolve())
     if not found:
-        raise BadInput(f"no scene folders (image.png + totem_masks/) under "
+        raise BadInput(f"no scene folders (image.png or image.jpg + totem_masks/) under "
                               f"{', '.join(map(str, roots))}")
     return sorted(found)
 
@@ -86,7 +94,7 @@ def modes_for(info: dict, table1: bool) -> list[str]:
 
 def fingerprint(scene: Path) -> str | None:
     """The scene's fit fingerprint, or None when it cannot be read (check will say why)."""
-    from inverse.fit import scene_fingerprint
+    from inverse.fit_files import scene_fingerprint
 
     try:
         return scene_fingerprint(folder.read_scene(scene))
@@ -271,7 +279,7 @@ def _fmt(x, digits=3):
 def markdown(bench: dict) -> str:
     """The tables of ``bench.md``: ours beside the paper's."""
     s = bench["summary"]
-    lines = [f"# totems bench\n",
+    lines = ["# totems bench\n",
              f"{bench['scenes']} scenes, {len(bench['runs'])} runs "
              f"({bench.get('fits', len(bench['runs']))} fits; a copy edited outside the "
              f"totems reuses its original's fit), {bench['jobs']} jobs, "

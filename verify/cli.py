@@ -2,7 +2,7 @@
 
 Exit codes (as ``cmp``/``diff``): 0 ran (and for verify/check: consistent), 1 verify/check
 found the photo inconsistent with its totems, 2 bad input or usage (one line on stderr).
-Everything else is a bug. Verbs and outputs: ``shared/CONTRACT.md``.
+Everything else is a bug. Verbs and outputs: ``docs/contract.md``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,12 @@ import sys
 import time
 from pathlib import Path
 
-EXIT_OK, EXIT_INCONSISTENT, EXIT_BAD_INPUT = 0, 1, 2
+from verify import arguments
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_INCONSISTENT, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
+EXIT_BUG = 70                      # an unexpected error (sysexits' EX_SOFTWARE)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -21,41 +26,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 640x480, got {text!r}")
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 px, got {text}")
-    return w, h
-
-
-def _size_any(text: str) -> tuple[int, int]:
-    try:
-        a, b = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected COLSxROWS, e.g. 9x6, got {text!r}")
-    return a, b
-
-
-def _region(text: str) -> tuple[int, int, int, int]:
-    try:
-        x, y, w, h = (int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"region must be x,y,w,h in pixels, got {text!r}")
-    return x, y, w, h
-
-
-def _positive(kind):
-    def parse(text):
-        v = kind(text)
-        if v <= 0:
-            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
-        return v
-    return parse
 
 
 # --------------------------------------------------------------------------- verbs
@@ -70,7 +40,8 @@ def cmd_scene_make(args) -> dict:
     t0 = time.perf_counter()
     options = {"spp": args.spp} if args.spp else {}
     out = make_scene(args.out, preset=args.preset, seed=args.seed, size=args.size,
-                     n_totems=args.totems, progress=_progress(args), **options)
+                     n_totems=args.totems, camera=args.camera, progress=_progress(args),
+                     **options)
     return {"scene": str(out), "preset": args.preset, "seed": args.seed,
             "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -86,12 +57,24 @@ def cmd_tamper(args) -> dict:
     return {"scene": str(out), "kind": args.kind, "seed": args.seed}
 
 
+def cmd_recapture(args) -> dict:
+    from scenes.channel import Channel
+    from scenes.recapture import recapture
+
+    channel = Channel(jpeg=tuple(args.jpeg or ()), chroma=args.chroma, resize=args.resize,
+                      long_side=args.long_side, noise=args.noise, blur=args.blur,
+                      sharpen=args.sharpen, exposure=args.exposure, gamma=args.gamma,
+                      seed=args.seed)
+    return recapture(args.scene, args.out, channel)
+
+
 def _out_dir(args) -> Path:
     return Path(args.out) if args.out else Path(args.scene) / "totems-out"
 
 
 def _fit(args, scene):
-    from inverse.fit import fit_scene, write_fit
+    from inverse.fit import fit_scene
+    from inverse.fit_files import write_fit
     from scenes.errors import BadInput
 
     true_pose = None
@@ -102,10 +85,13 @@ def _fit(args, scene):
         if truth is None:
             raise BadInput("--oracle-pose needs truth/totem_pose.npy (synthetic scenes)")
         true_pose = truth.totem_pose
+    from inverse.fit import FitSettings
+
+    settings = FitSettings(pose_from=getattr(args, "pose_from", "mask"))
     result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
-                       true_pose=true_pose, progress=_progress(args))
+                       true_pose=true_pose, progress=_progress(args), settings=settings)
     fit_dir = _out_dir(args) / "fit"
-    write_fit(result, fit_dir)
+    write_fit(result, fit_dir, scene=scene)
     return result, fit_dir
 
 
@@ -137,7 +123,7 @@ def cmd_verify(args) -> dict:
     from scenes.folder import read_scene
 
     scene = read_scene(args.scene)
-    from inverse.fit import load_fit, scene_fingerprint
+    from inverse.fit_files import load_fit, scene_fingerprint
     fit_dir = Path(args.fit) if args.fit else _out_dir(args) / "fit"
     if args.fit or (fit_dir / "fit.json").is_file():
         fit = load_fit(fit_dir)
@@ -189,13 +175,13 @@ def cmd_ingest(args) -> dict:
 def cmd_masks(args) -> dict:
     from scenes.detect_masks import write_masks
 
-    return write_masks(args.scene, n=args.n)
+    return write_masks(args.scene, n=args.n, hints=args.hint or None, radii=args.radius)
 
 
 def cmd_crosscheck(args) -> dict:
     import numpy as np
 
-    from inverse.fit import load_fit
+    from inverse.fit_files import load_fit
     from scenes.folder import read_mask
     from scenes.nerf_layout import read_nerf_case
     from verify.crosscheck import crosscheck, read_nerf_log, write_crosscheck
@@ -227,9 +213,12 @@ def _print_summary(verb: str, summary: dict) -> None:
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
+    elif verb == "masks":
+        how = "proposed" if summary["proposed"] else "as drawn"
+        print(f"masks: {summary['n']} totems ({how}); check them in {summary['check']}")
     else:
-        where = next((summary[k] for k in ("scene", "fit", "bench", "calib", "crosscheck",
-                                           "check") if k in summary), "")
+        where = next((summary[k] for k in (verb, "scene", "fit", "bench", "calib",
+                                           "crosscheck", "check") if k in summary), "")
         print(f"{verb}: wrote {where}")
 
 
@@ -250,6 +239,9 @@ def _fit_arguments(v) -> None:
                    help="keep the totem centres at their initialisation")
     v.add_argument("--oracle-pose", action="store_true",
                    help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
+    v.add_argument("--pose-from", choices=("mask", "photo"), default="mask",
+                   help="the totems' initial pose from the masks' outlines (default), or "
+                        "from the rims' edges in the photo near them (hand-drawn masks)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -265,17 +257,33 @@ def build_parser() -> argparse.ArgumentParser:
         v.add_argument("--quiet", action="store_true", help="no progress, no summary line")
         return v
 
+    _scene_verbs(verb, sub)
+    _check_verbs(verb)
+    _photo_verbs(verb)
+    return p
+
+
+def _scene_verbs(verb, sub) -> None:
+    """scene make, tamper, recapture: the verbs that write scene folders."""
     scene = sub.add_parser("scene", help="synthetic totem-protected scenes")
     scene_sub = scene.add_subparsers(dest="scene_verb", required=True, parser_class=_Parser)
     v = verb("make", cmd_scene_make, "render a synthetic totem-protected scene folder",
              scene_sub)
     v.add_argument("out", help="new scene folder")
-    v.add_argument("--preset", choices=("box", "envmap"), default="box")
+    from scenes.presets import PRESETS
+
+    v.add_argument("--preset", choices=PRESETS, default="box")
     v.add_argument("--seed", type=int, default=1)
-    v.add_argument("--size", type=_size, default=(640, 480), help="WxH (default 640x480)")
-    v.add_argument("--totems", type=_positive(int), default=4, help="number of totems")
-    v.add_argument("--spp", type=_positive(int), default=None,
+    v.add_argument("--size", type=arguments.size, default=(640, 480),
+                   help="WxH (default 640x480)")
+    v.add_argument("--totems", type=arguments.positive(int), default=None,
+                   help="number of totems (default: the preset's: box and envmap 4, "
+                        "the others drawn per seed)")
+    v.add_argument("--spp", type=arguments.positive(int), default=None,
                    help="samples per pixel (default: the preset's)")
+    v.add_argument("--camera", action="store_true",
+                   help="a realistic camera: photon and read noise on the linear render, "
+                        "before the sRGB tone curve (off: the render as it is)")
 
     v = verb("tamper", cmd_tamper, "write a manipulated copy of a scene folder")
     v.add_argument("scene")
@@ -283,10 +291,41 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--kind", required=True,
                    choices=("color", "splice", "inpaint", "shift", "remove", "insert"))
     v.add_argument("--seed", type=int, default=0)
-    v.add_argument("--region", type=_region, default=None,
+    v.add_argument("--region", type=arguments.region, default=None,
                    help="x,y,w,h region to edit (photos without truth/)")
     v.add_argument("--region-mask", default=None, help="PNG mask of the region to edit")
 
+    v = verb("recapture", cmd_recapture, "write a copy of a scene folder whose photo went "
+             "through a camera and a messenger: blur, tone curve, noise, sharpening, "
+             "JPEG, resize, JPEG again (in that order)")
+    v.add_argument("scene")
+    v.add_argument("out", help="new scene folder")
+    v.add_argument("--jpeg", type=int, action="append", metavar="Q",
+                   help="JPEG quality 1-100; repeat for a double JPEG (with a resize, "
+                        "the last one comes after it)")
+    v.add_argument("--chroma", choices=("420", "444"), default="420",
+                   help="JPEG chroma subsampling (default 420)")
+    size = v.add_mutually_exclusive_group()
+    size.add_argument("--resize", type=float, default=None, metavar="F",
+                      help="scale factor in (0, 1]; K and the masks follow the photo")
+    size.add_argument("--long-side", type=int, default=None, metavar="N",
+                      help="shrink so that the long side is N px (a smaller photo is "
+                           "left as it is)")
+    v.add_argument("--noise", type=float, default=0.0, metavar="SIGMA",
+                   help="Gaussian noise, sigma in 8-bit levels")
+    v.add_argument("--blur", type=float, default=0.0, metavar="SIGMA",
+                   help="defocus: Gaussian sigma in pixels")
+    v.add_argument("--sharpen", type=float, default=0.0, metavar="AMOUNT",
+                   help="unsharp mask amount (radius 1 px)")
+    v.add_argument("--exposure", type=float, default=1.0, metavar="GAIN",
+                   help="gain on linear light (clipped at white)")
+    v.add_argument("--gamma", type=float, default=1.0, metavar="G",
+                   help="tone curve out = in ** (1/G) on sRGB values")
+    v.add_argument("--seed", type=int, default=0, help="the noise's seed (default 0)")
+
+
+def _check_verbs(verb) -> None:
+    """fit, verify, check, bench: the verbs that judge photos."""
     v = verb("fit", cmd_fit, "pose initialisation + joint fit of the radiance grid and "
              "the totem centres")
     _fit_arguments(v)
@@ -304,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     v = verb("bench", cmd_bench, "run check over many scene folders and write the tables")
     v.add_argument("dirs", nargs="+", help="folders holding scene folders")
     v.add_argument("--out", default="bench-out", help="output folder (default bench-out)")
-    v.add_argument("--jobs", type=_positive(int), default=1, help="scenes run at once")
+    v.add_argument("--jobs", type=arguments.positive(int), default=1, help="scenes run at once")
     v.add_argument("--no-table1", action="store_true",
                    help="skip the initial-pose and oracle-pose fits of untouched scenes")
     v.add_argument("--refit", action="store_true",
@@ -313,11 +352,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="verify again on the fits an earlier bench left in OUT (after a "
                         "change to verify/ alone) instead of fitting")
 
+
+def _photo_verbs(verb) -> None:
+    """calib, ingest, masks, crosscheck: the verbs for one's own photos."""
     v = verb("calib", cmd_calib, "camera calibration from checkerboard photos")
     v.add_argument("images", nargs="+", help="photos of a printed checkerboard")
-    v.add_argument("--board", type=_size_any, required=True,
+    v.add_argument("--board", type=arguments.size_any, required=True,
                    help="inner corners as COLSxROWS, e.g. 9x6")
-    v.add_argument("--square", type=_positive(float), required=True,
+    v.add_argument("--square", type=arguments.positive(float), required=True,
                    help="side of one square, metres")
     v.add_argument("--alpha", type=float, default=0.0,
                    help="0 keeps only valid pixels after undistortion, 1 keeps all")
@@ -333,14 +375,19 @@ def build_parser() -> argparse.ArgumentParser:
     v = verb("masks", cmd_masks, "propose totem_masks/ where the folder has none, and a "
              "picture to check them")
     v.add_argument("scene")
-    v.add_argument("--n", type=_positive(int), default=None, help="number of totems")
+    v.add_argument("--n", type=arguments.positive(int), default=None,
+                   help="number of totems (default: as many as the key lists)")
+    v.add_argument("--hint", type=arguments.point, action="append", default=None,
+                   metavar="X,Y",
+                   help="a pixel inside a totem, once per totem: search around it")
+    v.add_argument("--radius", type=arguments.point, default=None, metavar="MIN,MAX",
+                   help="range of totem radii in the photo, pixels")
 
     v = verb("crosscheck", cmd_crosscheck, "our fit beside a NeRF-path run of the scene")
     v.add_argument("scene")
     v.add_argument("--nerf", required=True, help="NeRF-path experiment (log) folder")
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
     _region_argument(v)
-    return p
 
 
 def main(argv=None) -> int:
@@ -361,6 +408,21 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("totems: interrupted", file=sys.stderr)
         return 130
+    except Exception:                  # a bug: say so, never as a verdict's exit code
+        import traceback
+
+        traceback.print_exc()
+        print("totems: internal error (a bug): please report it with the lines above",
+              file=sys.stderr)
+        return EXIT_BUG
+    if summary.get("complete") is False:
+        print(f"totems: {args.verb}: found {summary['found']} of the "
+              f"{summary['expected'] or 'wanted'} totems, searching {summary['searched']}; "
+              f"see {summary['check']}; draw the missing masks by hand (totem_masks/, "
+              "white = totem) or give --hint X,Y for each totem", file=sys.stderr)
+        if args.json:
+            print(json.dumps(summary, default=str))
+        return EXIT_INCOMPLETE
     if args.json:
         print(json.dumps(summary, default=str))
     elif not args.quiet:

@@ -25,22 +25,16 @@ Limits: a forger who paints a hue that the totems see somewhere along the pixel'
 (the floor's colour over a removed object, a sky-coloured splice under a sky the glass
 reflects) is not caught by this test; nor at the farthest slices, where every totem
 looks along the pixel's own direction, a hue they see that way from where they stand.
-Brightness alone is not judged (L1 does). Limiting the depths to those in front of the
-stereo surface (``inverse.sweep.plane_sweep``, up to 4-16 slices behind it), so that a
-removed object's background would not count, was tried: on envmap seed 5 the untouched
-score rose from 0.021 to 0.064-0.155 (the sweep's depth is wrong there), and box seed 2's
-removal AP did not move (0.68).
+Brightness alone is not judged here (RANGE does). Every depth along the ray counts, behind the
+stereo surface too, since that surface is wrong where the sweep fails (see
+docs/decisions.md, 'corroborate: every depth along the ray').
 
 Two ways the totems can explain a pixel's hue: the view rebuilt from them shows it
 nearby (CHROMA, :func:`verify.patches.chroma_distance`), or two of them see it at one
 depth along the pixel's ray (CORROB, here). An authentic pixel needs one of them, so
 :func:`unseen` takes the smaller distance: a pixel is suspicious only where neither
-explains it. Measured on the standard set (`totems bench`, 640 x 480, box and envmap
-seeds 1-5, 58 edits), patch AP of UNSEEN / CHROMA / CORROB: colour 0.917 / 0.905 /
-0.901, splice 0.830 / 0.837 / 0.720, insert 0.707 / 0.579 / 0.623, remove 0.363 / 0.377
-/ 0.281, inpaint 0.287 / 0.295 / 0.251, shift 0.419 / 0.405 / 0.438; the untouched
-photos' scores (``verify.verdict``) at most 0.028 against CHROMA's 0.070 (envmap seed 5,
-where the rebuilt view missed three objects).
+explains it (see docs/decisions.md, 'corroborate: UNSEEN, the smaller of CHROMA and
+CORROB').
 
 Public
 ------
@@ -53,10 +47,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from inverse.grid import FrustumFrame
+from inverse.grid import FrustumFrame, cells_to_pixels
+from inverse.rays import TotemRays
 from inverse.sweep import slice_colours
 from scenes.colour import linear_to_srgb
 from verify.patches import chroma
+
+__all__ = ["CELL_PX", "N_SLICES", "SIGMA_CELLS", "COS_EVIDENCE", "MIN_TOTEMS",
+           "map_res", "cell_centres", "cell_errors", "corroboration", "unseen"]
 
 CELL_PX = 5.2
 """Side (pixels) of the map's cells over the fit's frustum: the fit's stereo maps have
@@ -70,7 +68,7 @@ N_SLICES = 64
 SIGMA_CELLS = 1.5
 """Gaussian spread (cells) of each ray's splat; the photo is blurred to match."""
 
-COS_MIN = 0.3
+COS_EVIDENCE = 0.3
 """Rays that entered their sphere at an incidence cosine below this are left out: near
 the rim the glass mixes in reflection and blurs."""
 
@@ -123,21 +121,18 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.n
     return np.where(np.isfinite(best), best, np.nan)
 
 
-def corroboration(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, *,
+def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
                   cell_px: float = CELL_PX, n_slices: int = N_SLICES,
-                  sigma: float = SIGMA_CELLS,
-                  cos_min: float = COS_MIN, min_totems: int = MIN_TOTEMS) -> np.ndarray:
+                  sigma: float = SIGMA_CELLS, cos_evidence: float = COS_EVIDENCE,
+                  min_totems: int = MIN_TOTEMS) -> np.ndarray:
     """How far each photo pixel's hue is from what ``min_totems`` totems saw along its ray.
 
     Parameters
     ----------
-    o, d : (m, 3) the totem pixels' rays leaving the glass (exit points, metres; unit
-        directions), camera frame (``inverse.fit.TotemRays``).
-    radiance : (m, 3) linear RGB each ray brought back (Fresnel and reflection undone).
-    totem : (m,) int, the totem each ray left; cos_in : (m,) its incidence cosine.
+    rays : the totem pixels' rays leaving the glass (:class:`inverse.rays.TotemRays`).
     frame : the fit's frustum frame: the map covers its ``(s, t)`` range and depths.
     image : (H, W, 3) the photo, sRGB [0, 1].
-    cell_px, n_slices, sigma, cos_min, min_totems : see the module constants.
+    cell_px, n_slices, sigma, cos_evidence, min_totems : see the module constants.
 
     Returns
     -------
@@ -145,37 +140,17 @@ def corroboration(o, d, radiance, totem, cos_in, frame: FrustumFrame, image, *,
     """
     image = np.asarray(image, np.float64)
     H, W = image.shape[:2]
-    good = np.asarray(cos_in) >= cos_min
-    totem = np.asarray(totem)
-    if len(np.unique(totem[good])) < min_totems:
+    rays = rays.entering_at_least(cos_evidence)
+    if rays.n_totems() < min_totems:
         return np.full((H, W), np.nan)
     res = map_res(frame, cell_px)
-    colour = linear_to_srgb(np.clip(np.asarray(radiance, np.float64)[good], 0.0, 1.0))
-    sc = slice_colours(np.asarray(o)[good], np.asarray(d)[good], colour, totem[good],
-                       frame, res, n_slices=n_slices, sigma=sigma)
+    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
+    sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame, res, n_slices=n_slices,
+                       sigma=sigma)
     blurred = ndimage.gaussian_filter(chroma(image), (sigma * cell_px, sigma * cell_px, 0))
     uu, vv = cell_centres(frame, res)
     E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
-    return to_pixels(E, frame, (W, H))
-
-
-def to_pixels(cells, frame: FrustumFrame, size) -> np.ndarray:
-    """A (nt, ns) map over the frame's range read at every pixel: bilinear where the
-    four cells around it are known, NaN where the nearest cell is unknown."""
-    W, H = size
-    nt, ns = cells.shape
-    uu, vv = np.meshgrid(np.arange(W), np.arange(H))
-    s, t = frame.pixel_to_st(uu.ravel(), vv.ravel())
-    fs, ft = np.asarray(s) * ns - 0.5, np.asarray(t) * nt - 0.5
-    known = np.isfinite(cells)
-    filled = np.where(known, cells, 0.0)
-    num = ndimage.map_coordinates(filled, [ft, fs], order=1, mode="nearest")
-    den = ndimage.map_coordinates(known.astype(np.float64), [ft, fs], order=1,
-                                  mode="nearest")
-    near = ndimage.map_coordinates(known.astype(np.float64), [ft, fs], order=0,
-                                   mode="nearest") > 0.5
-    out = np.where(near & (den > 1e-6), num / np.maximum(den, 1e-6), np.nan)
-    return out.reshape(H, W)
+    return cells_to_pixels(E, frame, (W, H))
 
 
 def unseen(chroma_distance, corroboration) -> np.ndarray:

@@ -26,6 +26,9 @@ import numpy as np
 from scenes import folder
 from scenes.errors import BadInput
 
+__all__ = ["TOTEM_LINE", "TOP_FRACTION", "NerfRun", "parse_loss_txt", "read_nerf_log",
+           "heatmap_agreement", "crosscheck", "write_crosscheck"]
+
 TOTEM_LINE = re.compile(r"\[TRAIN\] Iter:\s*(\d+)\s+Totem(\d+):\s*\[([^\]]*)\]")
 TOP_FRACTION = 0.10
 

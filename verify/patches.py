@@ -54,6 +54,14 @@ import numpy as np
 
 from scenes.errors import BadInput
 
+__all__ = ["GRID", "PATCH_PX", "MIN_PATCH_PX", "NERF_L1_SCALE", "MANIP_FRACTION",
+           "CHROMA_RADIUS_PX", "TOP_FRACTION", "POOLED_BY_WORST", "CHROMA_BLUR_PX",
+           "METRICS", "PatchGrid", "patch_grid", "patch_fraction", "patch_means",
+           "patch_top_means", "patch_scores", "pixel_errors", "chroma",
+           "chroma_distance", "range_distance", "outside_range", "heatmaps",
+           "patch_labels", "patch_ap", "to_pixels", "colorize", "heatmap_vis",
+           "heatmap_overlay"]
+
 GRID = 30
 """Patches per side of the grid (paper: 30 x 30)."""
 
@@ -71,31 +79,18 @@ MANIP_FRACTION = 0.10
 
 CHROMA_RADIUS_PX = 16
 """How far (pixels) the reconstruction may be off: the photo's chroma is compared with the
-range of the reconstruction's chroma over a (2r+1)-pixel square. Measured on the
-standard set's saved reconstructions (640x480, box and envmap seeds 1-5, 58 edits),
-patch AP of the chroma distance against plain L1 (both patch means): colour 0.91 /
-0.69, splice 0.84 / 0.77, insert 0.58 / 0.24, remove 0.37 / 0.22, inpaint 0.29 / 0.19,
-shift 0.36 / 0.31.
-A radius of 8 gained 0.03-0.04 on inpaint, remove and shift and lost 0.02-0.05 on
-colour, splice and insert; 24 the reverse. 16 is a quarter of a patch. Rechecked with
-the hue metrics' worst-tenth scores (2026-12-01): UNSEEN patch AP with radius 8 / 12 /
-16 / 24: splice 0.866 / 0.889 / 0.892 / 0.889, insert 0.798 / 0.815 / 0.810 / 0.773,
-inpaint 0.316 / 0.326 / 0.342 / 0.301, colour 0.914-0.918 for all; 8 raised the
-held-out threshold and made a false alarm on the standard set."""
+range of the reconstruction's chroma over a (2r+1)-pixel square. 16, a quarter of a
+patch: a smaller radius favours inpainting, removals and shifts, a larger one colour
+patches, splices and insertions (see docs/decisions.md, 'patches: CHROMA with a 16 px
+radius')."""
 
 TOP_FRACTION = MANIP_FRACTION
 """The hue metrics' patch score is the mean of the patch's worst ``TOP_FRACTION`` of
 counted pixels (:func:`patch_top_means`), not of all of them: a patch is labelled
 manipulated when a tenth of it is, and an edit of that size would otherwise be diluted
-ten times by the untouched rest. Measured on the standard set's fits (640 x 480, box
-and envmap seeds 1-5, 58 edits; 2026-12-01), UNSEEN patch AP with the mean / the worst
-10 %: colour 0.918 / 0.917, splice 0.833 / 0.892, insert 0.708 / 0.810, remove 0.354 /
-0.360, inpaint 0.335 / 0.342, shift 0.479 / 0.494; edits flagged by the verdict (with
-RANGE, thresholds recalibrated on the held-out scenes) 24 -> 31, no false alarm. The
-worst 3 % or 5 % gained insert and splice as much and lost colour (0.88-0.89); 15 %
-gave colour 0.931, insert 0.803. RANGE keeps the mean: pooled by its worst pixels it
-reads every edge the rebuilt view misplaces (held-out threshold 0.14 -> 0.44, colour AP
-0.85 -> 0.83)."""
+ten times by the untouched rest. RANGE keeps the mean: pooled by its worst pixels it
+reads every edge the rebuilt view misplaces (see docs/decisions.md, 'patches: worst
+tenth of pixels for the hue metrics')."""
 
 POOLED_BY_WORST = ("CHROMA", "CORROB", "UNSEEN", "ABSENT")
 """Metrics whose patch score is :func:`patch_top_means`; the others (L1 and SSIM as the
@@ -286,14 +281,9 @@ def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
     brightness.
 
     The box of per-channel ranges is loose in a colourful neighbourhood (a pastel on red
-    next to green passes). The distance to the *nearest* reconstructed chroma within the
-    radius instead (offsets on a 2-px lattice) was measured on the standard set's fits
-    (2026-12-01, with plain patch means): UNSEEN patch AP colour 0.918 -> 0.920,
-    insert 0.708 -> 0.730, shift 0.479 -> 0.527, splice 0.833 -> 0.822; one more edit
-    flagged (25 of 58), the held-out threshold 0.041 -> 0.043; 3 s more per photo. Not
-    adopted: the gains are small, and where the reconstruction is sharp it holds no
-    blend of two neighbours' colours for the blurred photo's edge between them to match
-    (the box does).
+    next to green passes), but where the reconstruction is sharp it still matches the
+    blurred photo's edge between two colours, as the nearest chroma would not (see
+    docs/decisions.md, 'patches: the box of ranges, not the nearest chroma').
 
     Parameters
     ----------
@@ -316,12 +306,9 @@ def range_distance(image: np.ndarray, recon: np.ndarray, *,
     off and its blur are forgiven within ``radius`` px (L1 counts them everywhere).
     Parameters and result as :func:`chroma_distance`: sRGB in [0, 1], (H, W) >= 0.
 
-    The converse, the view's colour (or chroma) outside the photo's range (both blurred
-    3 px; radius 8 or 16), was measured for removals and inpainting, where the view
-    shows what the photo lost (2026-12-01, the standard set's fits, worst-tenth patch
-    scores, thresholds by the held-out rule): patch AP remove 0.22-0.36, inpaint
-    0.13-0.44, and with chroma an untouched photo over its threshold (envmap seed 5).
-    Not adopted: the photo's sharp texture spans the blurred view's colours.
+    The converse (the view's colour outside the photo's range) is not tested: the
+    photo's sharp texture spans the blurred view's colours (see docs/decisions.md,
+    'patches: no converse range test').
     """
     return outside_range(image, recon, radius=radius, sigma=sigma)
 

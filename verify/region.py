@@ -25,18 +25,10 @@ quarter.
 
 The region is the set of those pixels closed over a box with its holes filled, not the
 paper's convex hull (kept as ``shape="hull"``): the hull also takes in what lies between
-well-seen parts, and the verdict then judged patches the totems hardly see. Measured on the
-standard set (box and envmap seeds 1-5, 640 x 480, the same fits, 68 photos): the
-untouched photos' verdict scores 0.081-0.200 with the hull (envmap seed 4 a false alarm,
-its worst patches at the hull's left edge) and 0.052-0.141 filled; patch AP (L1) colour
-0.610 -> 0.623, splice 0.706 -> 0.755, inpaint 0.145 -> 0.154, removal 0.160 -> 0.175,
-insertion 0.237 -> 0.251, shift 0.271 -> 0.277; the region covers 74 % of the photo instead of 82 %.
-Three shifts on envmap scenes that the hull flagged (0.26-0.31) score 0.05-0.17 filled.
-Keeping only the pixels of dense boxes (no closing) was measured with the current verdict
-(2026-12-01, same fits): the same edits flagged, UNSEEN patch AP within 0.03 (shift 0.49
--> 0.52), and box seed 2's untouched score, driven by a box the totems do not see behind
-a sphere, went up (0.056 -> 0.059), not down: the patches it drives hold the sphere
-too, which the totems see densely.
+well-seen parts, and the verdict then judged patches the totems hardly see (see
+docs/decisions.md, 'region: filled, not the convex hull'). Keeping only the pixels of
+dense boxes, without the closing, changed no verdict and raised the nearest untouched
+score (see docs/decisions.md, 'region: closing kept over dense boxes only').
 
 References
 ----------
@@ -49,7 +41,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from scenes.edits2d import bbox
 from scenes.errors import BadInput
+
+__all__ = ["BOX_PX", "DENSITY", "project_counts", "protected_region", "filled", "hull"]
 
 BOX_PX = 30
 """Width in pixels of the box filter over the point counts (paper: 30)."""
@@ -157,6 +152,7 @@ def hull(kept: np.ndarray) -> np.ndarray:
         except QhullError:
             pass
     # degenerate hull (a point or a line of pixels): their bounding box
+    x, y, w, h = bbox(kept)
     out = np.zeros_like(kept, dtype=bool)
-    out[ys.min():ys.max() + 1, xs.min():xs.max() + 1] = True
+    out[y:y + h, x:x + w] = True
     return out

@@ -19,6 +19,9 @@ from scenes import folder
 from scenes.errors import BadInput
 from verify import absence, corroborate, patches, region, verdict as verdict_mod
 
+__all__ = ["VIS_FLOOR", "Report", "sphere_silhouette", "mask_iou", "verify_scene",
+           "write_verify"]
+
 VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1,
              "UNSEEN": 0.1, "ABSENT": 0.1}
 """Smallest top of the colour scale of the heatmap pictures (heatmap.npy units).
@@ -64,8 +67,8 @@ class Report:
     def to_json(self) -> dict:
         """report.json: the contract's fields plus ``scores`` (each metric's own score,
         threshold and median patch; ``score`` is the largest score / threshold),
-        ``drivers``, ``key_fingerprint``, ``region`` (the protected region's shape) and
-        ``metrics.patch_ap_CHROMA``."""
+        ``drivers``, ``key_fingerprint``, ``region`` (the protected region's shape) and a
+        ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
             "score": _num(self.score),
@@ -153,11 +156,9 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     rays = getattr(fit, "rays", None)
     if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)
-        errors["CORROB"] = corroborate.corroboration(
-            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image)
-        errors["ABSENT"] = absence.absence(
-            rays.o, rays.d, rays.radiance, rays.totem, rays.cos_in, frame, image,
-            totem_mask, scene.K, getattr(fit, "recon_depth", None))
+        errors["CORROB"] = corroborate.corroboration(rays, frame, image)
+        errors["ABSENT"] = absence.absence(rays, frame, image, totem_mask, scene.K,
+                                           getattr(fit, "recon_depth", None))
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
