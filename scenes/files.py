@@ -48,14 +48,20 @@ def read_mask(path, *, what: str = "mask") -> np.ndarray:
     return _decode(path, what, mode="L") > 127
 
 
-def _decode(path, what: str, mode: str) -> np.ndarray:
-    from PIL import Image, UnidentifiedImageError
-
+def _readable(path, what: str) -> Path:
+    """``path`` as a Path, BadInput unless it is a file of at most MAX_FILE_BYTES."""
     path = Path(path)
     if not path.is_file():
         raise BadInput(f"{what} not found: {path}")
     if path.stat().st_size > MAX_FILE_BYTES:
         raise BadInput(f"{what} is larger than {MAX_FILE_BYTES >> 20} MB: {path}")
+    return path
+
+
+def _decode(path, what: str, mode: str) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    path = _readable(path, what)
     try:
         with Image.open(path) as im:
             if im.format not in IMAGE_FORMATS:
@@ -181,11 +187,7 @@ def safe_load_npy(path):
 
     Returns the array, or for a 0-d object array (``np.save(dict)``) the object.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise BadInput(f"file not found: {path}")
-    if path.stat().st_size > MAX_FILE_BYTES:
-        raise BadInput(f"file too large: {path}")
+    path = _readable(path, "file")
     try:
         with open(path, "rb") as f:
             version = np.lib.format.read_magic(f)

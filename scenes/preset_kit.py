@@ -170,6 +170,15 @@ def cube(centre, size, yaw_deg=0.0) -> np.ndarray:
     return _affine(_yaw(yaw_deg) @ np.diag(np.asarray(size, float) / 2), centre)
 
 
+def resting_box(rng, name: str, xz, base_y: float, size, yaw_max: float, bank):
+    """A removable box ``name`` of ``size`` (w, h, d) m standing on the surface at room
+    height ``base_y`` (y down) at ``xz``, turned by up to ``yaw_max`` degrees, textured
+    from ``bank``: (its footprint's radius in metres, [its part])."""
+    w, h, d = size
+    local = cube((xz[0], base_y - h / 2, xz[1]), (w, h, d), rng.uniform(0, yaw_max))
+    return 0.5 * np.hypot(w, d), [(name, "cube", local, material(rng, bank), True)]
+
+
 def ball(centre, radius) -> np.ndarray:
     """Room ``to_world`` of the unit sphere as a ball of ``radius`` (m) at centre."""
     return _affine(np.eye(3) * radius, centre)

@@ -52,10 +52,7 @@ def _post(rng, xz, floor_y):
 
 
 def _crate(rng, xz, floor_y):
-    w, h, d = rng.uniform(0.35, 0.8, 3)
-    local = kit.cube((xz[0], floor_y - h / 2, xz[1]), (w, h, d), rng.uniform(0, 360))
-    return 0.5 * np.hypot(w, d), [("crate", "cube", local, kit.material(rng, THINGS),
-                                   True)]
+    return kit.resting_box(rng, "crate", xz, floor_y, rng.uniform(0.35, 0.8, 3), 360, THINGS)
 
 
 def _ball(rng, xz, floor_y):

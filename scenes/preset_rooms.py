@@ -105,10 +105,8 @@ def _floor_thing(rng, xz, floor_y):
     x, z = xz
     kind = int(rng.integers(3))
     if kind == 0:
-        w, h, d = rng.uniform(0.2, 0.5, 3)
-        return 0.5 * np.hypot(w, d), [("box", "cube", kit.cube(
-            (x, floor_y - h / 2, z), (w, h, d), rng.uniform(0, 360)),
-            kit.material(rng, THINGS), True)]
+        return kit.resting_box(rng, "box", xz, floor_y, rng.uniform(0.2, 0.5, 3), 360,
+                               THINGS)
     if kind == 1:
         r = rng.uniform(0.1, 0.25)
         return r, [("ball", "sphere", kit.ball((x, floor_y - r, z), r),

@@ -41,17 +41,12 @@ def _bottle(rng, xz, top_y):
 
 
 def _book(rng, xz, top_y):
-    w, h, d = rng.uniform(0.13, 0.22), rng.uniform(0.015, 0.05), rng.uniform(0.18, 0.28)
-    local = kit.cube((xz[0], top_y - h / 2, xz[1]), (w, h, d), rng.uniform(0, 180))
-    return 0.5 * np.hypot(w, d), [("book", "cube", local, kit.material(rng, THINGS),
-                                   True)]
+    size = rng.uniform(0.13, 0.22), rng.uniform(0.015, 0.05), rng.uniform(0.18, 0.28)
+    return kit.resting_box(rng, "book", xz, top_y, size, 180, THINGS)
 
 
 def _block(rng, xz, top_y):
-    w, h, d = rng.uniform(0.04, 0.1, 3)
-    local = kit.cube((xz[0], top_y - h / 2, xz[1]), (w, h, d), rng.uniform(0, 180))
-    return 0.5 * np.hypot(w, d), [("block", "cube", local, kit.material(rng, THINGS),
-                                   True)]
+    return kit.resting_box(rng, "block", xz, top_y, rng.uniform(0.04, 0.1, 3), 180, THINGS)
 
 
 def _fruit(rng, xz, top_y):
