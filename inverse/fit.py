@@ -72,7 +72,7 @@ class FitSettings:
     pose_start: float = 0.5          # fraction of all steps before centres move
     density_init: float = -4.0       # raw density (softplus -> 0.018 per 1/100)
     erode_px: int = 1                # mask erosion: drop the blurred rim
-    pose_from: str = "mask"          # "mask": the masks' outlines; "photo": the rim's edges
+    pose_from: str = "photo"         # "photo": the rim's edges near each mask; "mask": its outline
     margin: float = 0.15
     near_factor: float = 0.5
     far_factor: float = 1000.0       # far plane: effectively at infinity
@@ -208,7 +208,7 @@ def _check_scene(scene: folder.Scene):
         raise BadInput("the key must give one radius and IoR per totem mask")
 
 
-def _initial_pose(scene, K, radius, true_pose, fixed_pose, pose_from: str = "mask"):
+def _initial_pose(scene, K, radius, true_pose, fixed_pose, pose_from: str = "photo"):
     """The centres the fit starts from (n, 3) metres, and whether they stay fixed: the
     oracle's (fixed), the scene's own ``initial_totem_pose.npy``, or the masks' (moved
     to the rim's edges in the photo when ``pose_from`` is "photo", :mod:`inverse.rim`)."""

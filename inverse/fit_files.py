@@ -17,6 +17,7 @@ import numpy as np
 
 from inverse.grid import FrustumFrame
 from inverse.rays import TotemRays
+from inverse.rim import READ_PX
 from scenes import backend, folder
 from scenes.edits2d import bbox
 from scenes.errors import BadInput
@@ -49,15 +50,22 @@ class FitResult:
 
 
 def scene_fingerprint(scene: folder.Scene) -> str:
-    """Hash of what a fit depends on: totem pixels, masks, K, key and any initial pose.
+    """Hash of what a fit depends on: the pixels it reads, masks, K, key and any initial
+    pose.
 
-    The fit reads the photo only inside the totem masks, so a photo edited elsewhere (the
-    forger's case) shares the fit of the original, while a fit of another scene, of a
-    photo whose totem pixels changed, or made with another key, differs. The key enters
-    only through a hash, so the fingerprint can be shared.
+    The fit reads the photo inside the totem masks and, to find the rims, within
+    ``rim.READ_PX`` of them (unless an initial pose is given), so a photo edited
+    elsewhere (the forger's case) shares the fit of the original, while a fit of another
+    scene, of a photo whose totem pixels or rims changed, or made with another key,
+    differs. The key enters only through a hash, so the fingerprint can be shared.
     """
     masks = np.asarray(scene.masks, bool)
-    totem_px = np.asarray(scene.image)[masks.any(0)]
+    read = masks.any(0)
+    if scene.initial_pose is None:
+        from scipy.ndimage import binary_dilation
+
+        read = binary_dilation(read, iterations=READ_PX)
+    totem_px = np.asarray(scene.image)[read]
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(np.round(totem_px * 255).astype(np.uint8)).tobytes())
     h.update(np.packbits(masks).tobytes())

@@ -24,13 +24,16 @@ import numpy as np
 
 from scenes import camera, silhouette
 
-__all__ = ["SIGMA_PX", "SHIFT_PX", "GROW_PX", "N_POINTS", "outline", "edge_score",
+__all__ = ["SIGMA_PX", "SHIFT_PX", "GROW_PX", "N_POINTS", "READ_PX", "outline", "edge_score",
            "refine_centre", "refine_centres"]
 
 SIGMA_PX = 1.0       # blur before the derivative (pixels)
 SHIFT_PX = 2.5       # how far sideways the search moves the mask's outline (pixels)
 GROW_PX = 4.5        # how far the search grows or shrinks the mask's outline (pixels)
 N_POINTS = 180       # outline points scored
+READ_PX = int(np.ceil(SHIFT_PX + GROW_PX + 4 * SIGMA_PX))
+"""How far outside a mask the search reads the photo (pixels): the reach plus the
+blur's support; the fit's fingerprint covers that band."""
 
 
 def outline(P, R: float, K, n: int = N_POINTS):

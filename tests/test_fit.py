@@ -261,6 +261,27 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
         != back.scene_fingerprint
 
 
+def test_the_fingerprint_covers_the_band_the_rim_search_reads(small_scene):
+    # With no given initial pose the pose comes from the rims, read within rim.READ_PX of
+    # each mask: a pixel there changes the fit, one farther away does not.
+    from scipy.ndimage import binary_dilation
+
+    from inverse import fit_files, rim
+
+    scene, _ = small_scene
+    scene = dataclasses.replace(scene, initial_pose=None)
+    masks = scene.masks.any(0)
+    band = binary_dilation(masks, iterations=rim.READ_PX) & ~masks
+    far = ~binary_dilation(masks, iterations=rim.READ_PX + 1)
+    base = fit_files.scene_fingerprint(scene)
+    for where, same in ((band, False), (far, True)):
+        v, u = np.argwhere(where)[len(np.argwhere(where)) // 2]
+        image = scene.image.copy()
+        image[v, u] = 1.0 - image[v, u]
+        got = fit_files.scene_fingerprint(dataclasses.replace(scene, image=image))
+        assert (got == base) == same
+
+
 def test_load_fit_refuses_missing_or_corrupt(tmp_path):
     from inverse import fit_files
 
