@@ -1,5 +1,6 @@
 """Scene folders from strangers: every malformed folder is one line of BadInput."""
 
+import os
 import json
 
 import numpy as np
@@ -142,3 +143,13 @@ def test_scene_folder_that_is_a_file(tmp_path):
 def test_read_truth_absent_is_none(good):
     assert folder.read_truth(good) is None
     assert json.loads((good / "totems.json").read_text())["radius"] == 0.1
+
+
+def test_written_files_get_ordinary_permissions(tmp_path):
+    # Atomic writes go through mkstemp (owner-only); the file must end as open() makes it.
+    old = os.umask(0o022)
+    try:
+        folder.write_json(tmp_path / "a.json", {"x": 1})
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o644
