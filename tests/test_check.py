@@ -2,7 +2,9 @@
 
 An untouched 320 x 240 box scene is consistent (exit 0); the same photo with a large
 colour patch pasted above the totems is inconsistent (exit 1) and the report names
-patches on it. A fit is tied to the totem pixels, masks, camera and key: the untouched
+patches on it. Both again through a JPEG of quality 75: the untouched copy stays
+consistent with a p-value that is not small, the patch is still found with a small one
+(below 5 % and below the threshold's own). A fit is tied to the totem pixels, masks, camera and key: the untouched
 photo's fit serves a copy edited outside the totems, and is refused (exit 2, one line)
 for a photo whose totem pixels changed. The fit keeps the totem rays, which judge the
 patch on their own (CORROB); a fit folder written before it kept them still verifies.
@@ -57,7 +59,29 @@ def test_verify_without_a_fit_fits_and_passes_the_untouched_photo(verified):
     report = json.loads((out / "verify" / "report.json").read_text())
     assert report["verdict"] == "consistent"
     assert report["score"] <= report["threshold"]
+    assert report["p_value"] > 0.05
     assert 0.1 < report["protected_fraction"] <= 1.0
+
+
+def test_through_jpeg_75_the_untouched_copy_passes_and_the_patch_is_found(
+        scene, tampered, tmp_path):
+    plain, edited = tmp_path / "jpeg75", tmp_path / "square-jpeg75"
+    for src, dst in ((scene, plain), (tampered, edited)):
+        proc = totems("recapture", src, dst, "--jpeg", 75)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert (dst / "image.jpg").is_file()
+    proc = totems("check", plain, "--out", tmp_path / "a")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "a" / "verify" / "report.json").read_text())
+    assert report["verdict"] == "consistent" and report["p_value"] > 0.05
+    # The square lies above the totems: the JPEG copies share their totem pixels, so the
+    # untouched copy's fit serves the edited one.
+    proc = totems("verify", edited, "--fit", tmp_path / "a" / "fit", "--out", tmp_path / "b")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "b" / "verify" / "report.json").read_text())
+    assert report["verdict"] == "inconsistent"
+    assert report["p_value"] < min(0.05, report["line_p_value"])
+    assert "p = " in proc.stdout
 
 
 def test_a_pasted_colour_patch_is_inconsistent_and_named(tampered, tmp_path):

@@ -14,14 +14,14 @@ def test_score_is_the_excess_of_the_worst_patches_over_the_median():
     s = np.full((10, 10), 0.1)
     s[0, :3] = 0.5
     g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
-    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.3})
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.3}, calibration=None)
     assert d.medians["L1"] == pytest.approx(0.1) and d.scores["L1"] == pytest.approx(0.4)
     assert d.score == pytest.approx(0.4 / 0.3) and d.threshold == 1.0
     assert d.verdict == "inconsistent"
     assert d.drivers and all(x["row"] == 0 and x["col"] < 3 for x in d.drivers)
     assert all(x["excess"] == pytest.approx(0.4 / 0.3, abs=1e-5) and x["metric"] == "L1"
                for x in d.drivers)
-    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.45})
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.45}, calibration=None)
     assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.4 / 0.45, abs=1e-5)
 
 
@@ -32,14 +32,14 @@ def test_either_metric_over_its_threshold_decides():
     chroma = np.full((10, 10), 0.01)
     chroma[9, 7:] = 0.2
     d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
-                       thresholds={"L1": 0.18, "CHROMA": 0.1})
+                       thresholds={"L1": 0.18, "CHROMA": 0.1}, calibration=None)
     assert d.scores["L1"] == pytest.approx(0.0) and d.scores["CHROMA"] == pytest.approx(0.19)
     assert d.score == pytest.approx(1.9) and d.verdict == "inconsistent"
     assert {(x["row"], x["col"]) for x in d.drivers} <= {(9, 7), (9, 8), (9, 9)}
     assert all(x["metric"] == "CHROMA" and x["L1"] == pytest.approx(0.1) for x in d.drivers)
     # the same patches under a CHROMA threshold above their excess: consistent
     d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
-                       thresholds={"L1": 0.18, "CHROMA": 0.25})
+                       thresholds={"L1": 0.18, "CHROMA": 0.25}, calibration=None)
     assert d.verdict == "consistent" and d.score == pytest.approx(0.19 / 0.25)
 
 
@@ -78,7 +78,7 @@ def test_coloured_square_is_inconsistent_and_named():
 def test_threshold_override_and_no_patches():
     photo = texture()
     rep = verify_scene(make_scene(with_square(photo)), make_fit(photo),
-                       thresholds={"RANGE": 1e6, "UNSEEN": 1e6})
+                       thresholds={"RANGE": 1e6, "UNSEEN": 1e6}, calibration=None)
     assert rep.verdict == "consistent" and rep.decision.thresholds["RANGE"] == 1e6
     g = patches.patch_grid(make_scene().masks.any(axis=0))
     with pytest.raises(BadInput, match="cannot be verified"):

@@ -14,8 +14,12 @@ typical patch, in the metric's units (sRGB [0, 1]):
     score_m  (mean of the top-k s_p) - med,   k = max(TOP_K_MIN, ceil(TOP_K_FRACTION * n))
 
 The photo is *inconsistent* when any metric's score exceeds its threshold
-(``THRESHOLDS``); the reported ``score`` is the largest ``score_m / threshold_m``, so
-1 is the line. RANGE sees a colour or brightness that the rebuilt view shows nowhere
+(``THRESHOLDS``); the reported ``score`` (the ``statistic``) is the largest
+``score_m / threshold_m``, so 1 is the line. Its p-value, the chance an untouched photo
+of the calibration set scores as high (:mod:`verify.calibration`), is reported beside
+it, with the line's own (the false-alarm rate of the line), so a reader sees how unusual
+the photo is; the line is not moved to the calibration's 1 % (see docs/decisions.md,
+'verdict: p-values reported, the line kept'). RANGE sees a colour or brightness that the rebuilt view shows nowhere
 within 16 px (a grey, black or white patch, which has no hue); UNSEEN sees a hue that
 neither the rebuilt view shows nearby nor two totems see at one depth along the pixel's
 ray. Both forgive the view's blur, its brightness where it varies nearby, and edges a
@@ -108,6 +112,10 @@ class Verdict:
         metric's units (sRGB [0, 1]).
     excess : (G, G) each patch's largest excess over its metric's median, divided by
         the metric's threshold (NaN for patches not used).
+    statistic : ``score``, the quantity the calibration describes.
+    p_value : the calibration's p-value of ``statistic`` (None without a calibration).
+    line_p_value : the calibration's p-value at the line (1): the share of untouched
+        photos it expects called inconsistent (None without a calibration).
     used : (G, G) bool, patches that entered the verdict.
     drivers : list of dicts {row, col, box [x0, y0, x1, y1], excess, metric, and each
         metric's patch value}, worst first.
@@ -122,6 +130,9 @@ class Verdict:
     excess: np.ndarray
     used: np.ndarray
     drivers: list = field(default_factory=list)
+    statistic: float = float("nan")
+    p_value: float | None = None
+    line_p_value: float | None = None
 
 
 def top_k(n: int) -> int:
@@ -139,8 +150,11 @@ def metric_score(patch_scores: np.ndarray, used: np.ndarray):
     return med, excess, float(np.sort(excess[used])[::-1][:k].mean())
 
 
+_SHIPPED = "shipped"
+
+
 def decide(patch_scores: dict, cover: np.ndarray, grid, *,
-           thresholds: dict | None = None) -> Verdict:
+           thresholds: dict | None = None, calibration=_SHIPPED) -> Verdict:
     """The verdict from patch scores.
 
     Parameters
@@ -153,6 +167,8 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     cover : (G, G) fraction of each patch that is protected and not totem.
     grid : the :class:`verify.patches.PatchGrid` (for the drivers' pixel boxes).
     thresholds : {metric: threshold} overriding ``THRESHOLDS``.
+    calibration : a :class:`verify.calibration.Calibration` for the p-values, the one
+        the package ships (default), or None (no p-value).
 
     Raises
     ------
@@ -184,7 +200,19 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     verdict = "inconsistent" if score > 1.0 else "consistent"
     limit = top_k(int(used.sum())) if verdict == "consistent" else MAX_DRIVERS
     drivers = name_drivers(excess, used, grid, judged, worst, patch_scores, limit)
-    return Verdict(verdict, score, 1.0, scores, limits, medians, excess, used, drivers)
+    p_value, line_p_value = _p_values(score, calibration)
+    return Verdict(verdict, score, 1.0, scores, limits, medians, excess, used, drivers,
+                   score, p_value, line_p_value)
+
+
+def _p_values(score: float, calibration):
+    """The calibration's p-values of ``score`` and of the line (None without one)."""
+    if calibration is None:
+        return None, None
+    from verify import calibration as cal_mod
+
+    cal = cal_mod.load() if isinstance(calibration, str) else calibration
+    return cal.p_value(score), cal.p_value(1.0)
 
 
 def name_drivers(excess, used, grid, metrics, worst, listed, limit) -> list[dict]:

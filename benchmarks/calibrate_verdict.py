@@ -1,0 +1,142 @@
+"""Calibrate the verdict on the calibration set's untouched photos: the shipped p-values.
+
+    python benchmarks/make_set.py --set calibration --out CAL --jobs 2
+    totems bench CAL --out BENCH --jobs 2 --no-table1      # or --reverify after verify/
+    python benchmarks/calibrate_verdict.py BENCH [--write verify/calibration.json]
+
+Reads every untouched photo's statistic (``report.json`` ``statistic``) from a bench of
+the calibration set, refuses photos that are manipulated or whose seed belongs to
+another set (``benchmarks/sets.py``: a figure is never reported on what it was
+calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
+the statistics per preset and per channel, and the false alarms at ``ALPHA`` when each
+preset (and each channel) is held out, with 95 % intervals. ``--write`` stores the
+calibration the package ships.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from collections import defaultdict
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import sets  # noqa: E402
+
+from scenes import folder  # noqa: E402
+from scenes.errors import BadInput  # noqa: E402
+from verify import calibration  # noqa: E402
+
+
+def collect(bench_dir) -> list[dict]:
+    """One row per checked photo of a bench: name, preset, seed, channel, totems,
+    statistic, and whether it was manipulated."""
+    bench_dir = Path(bench_dir)
+    try:
+        runs = json.loads((bench_dir / "bench.json").read_text())["runs"]
+    except (OSError, ValueError, KeyError) as e:
+        raise BadInput(f"{bench_dir} holds no bench.json of a finished bench: {e}") from None
+    rows = []
+    for run in runs:
+        if run.get("mode") != "joint":
+            continue
+        if run.get("status") != "ok":
+            raise BadInput(f"{run.get('name')}: its check failed ({run.get('error')}); "
+                           f"a calibration needs every photo")
+        scene = Path(run["scene"])
+        report = json.loads((bench_dir / "runs" / f"{run['name']}-joint" / "verify"
+                             / "report.json").read_text())
+        desc = json.loads((scene / "truth" / "scene.json").read_text())
+        rows.append({"name": run["name"], "preset": desc["preset"], "seed": desc["seed"],
+                     "channel": run["name"].partition("+")[2] or "pristine",
+                     "totems": len(desc["totems"]),
+                     "manipulated": (scene / "manip_mask.png").is_file(),
+                     "statistic": calibration.statistic_of(report)})
+    return rows
+
+
+def check_rows(rows: list[dict], set_name: str = "calibration") -> None:
+    """Refuse rows a calibration must not see: manipulated photos, statistics missing
+    (a bench of older code: rerun it with ``--reverify``) and seeds outside the set."""
+    if not rows:
+        raise BadInput("no checked photo to calibrate on")
+    for r in rows:
+        if r["manipulated"]:
+            raise BadInput(f"{r['name']} is manipulated; the calibration takes untouched "
+                           f"photos only")
+        if r["statistic"] is None:
+            raise BadInput(f"{r['name']}: report.json has no statistic; verify again "
+                           f"with this code (totems bench --reverify)")
+        own = sets.SEEDS[set_name].get(r["preset"], ())
+        if r["seed"] not in own:
+            other = [s for s, by in sets.SEEDS.items() if r["seed"] in by.get(r["preset"], ())]
+            raise BadInput(f"{r['name']}: {r['preset']} seed {r['seed']} belongs to "
+                           f"{other[0] if other else 'no set'}, not the {set_name} set; "
+                           f"a calibration never sees another set's seeds")
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        return ""
+
+
+def report(rows: list[dict], cal: calibration.Calibration) -> str:
+    """The figures as markdown."""
+    t = np.array([r["statistic"] for r in rows])
+    lines = [f"line {cal.line():.3f} at p = {cal.alpha} (tail from u = {cal.u:.3f}, "
+             f"k = {cal.k} of n = {cal.n}, xi = {cal.xi:.3f}, sigma = {cal.sigma:.3f}); "
+             f"largest untouched {t.max():.3f} (p = {cal.p_value(t.max()):.3g})", ""]
+    for key in ("preset", "channel"):
+        groups = [r[key] for r in rows]
+        held = calibration.leave_one_group_out(t, groups, alpha=cal.alpha)
+        lines += [f"| {key} | photos | median | largest | false alarms, {key} held out |",
+                  "|---|---|---|---|---|"]
+        by = defaultdict(list)
+        for r in rows:
+            by[r[key]].append(r["statistic"])
+        for name, vals in sorted(by.items()):
+            k, n = held[name]
+            lines.append(f"| {name} | {len(vals)} | {np.median(vals):.3f} | "
+                         f"{max(vals):.3f} | {k} of {n} |")
+        k, n, (lo, hi) = held["all"]
+        lines += [f"| all | {n} | {np.median(t):.3f} | {t.max():.3f} | {k} of {n} "
+                  f"({100 * k / n:.1f} %, 95 % interval {100 * lo:.1f}-{100 * hi:.1f} %) |",
+                  ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("bench", type=Path, help="output folder of `totems bench` on the set")
+    p.add_argument("--write", type=Path, default=None,
+                   help="write the calibration here (the package's: verify/calibration.json)")
+    args = p.parse_args(argv)
+    try:
+        rows = collect(args.bench)
+        check_rows(rows)
+    except BadInput as e:
+        print(f"calibrate_verdict: {e}", file=sys.stderr)
+        return 2
+    source = {"set": "calibration", "photos": len(rows),
+              "presets": sorted({r["preset"] for r in rows}),
+              "channels": sorted({r["channel"] for r in rows}),
+              "totems": sorted({r["totems"] for r in rows}),
+              "commit": _commit(), "date": date.today().isoformat()}
+    cal = calibration.fit_tail([r["statistic"] for r in rows], source=source)
+    print(report(rows, cal))
+    if args.write:
+        folder.write_json(args.write, cal.to_json())
+        print(f"wrote {args.write}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,148 @@
+"""The calibrated verdict on a bench: false alarms per channel, catches and ROC per kind.
+
+    totems bench SET --out BENCH --jobs 2 --no-table1
+    python benchmarks/roc.py BENCH [--plot docs/roc.png]
+
+From a bench's runs (``bench.json``: each photo's ``statistic``, kind, preset and
+name, the channel after a ``+``), judged by a calibration (``--calibration``, default
+the shipped one: p-value below its alpha), prints:
+
+- untouched photos called inconsistent, per channel and per preset, with the exact
+  binomial 95 % interval of the rate;
+- per kind and channel, manipulated photos caught (p-value below alpha), with interval;
+- per kind, the image-level ROC AUC of the statistic, manipulated photos against every
+  untouched one, with a 95 % bootstrap interval (2000 resamples of each class);
+- per kind and channel, the mean patch AP of each judging metric.
+
+``--plot`` draws the ROC curves per kind. Seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from verify.calibration import clopper_pearson, load, statistic_of
+
+JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
+
+
+def load_runs(bench_dirs) -> list[dict]:
+    """The joint runs of one or more benches that finished, with their channel."""
+    rows = []
+    for d in bench_dirs:
+        for r in json.loads((Path(d) / "bench.json").read_text())["runs"]:
+            if r.get("mode") != "joint" or r.get("status") != "ok":
+                continue
+            t = statistic_of(r)
+            if t is None:
+                raise SystemExit(f"{r['name']}: no statistic in its report")
+            rows.append({**r, "statistic": t,
+                         "channel": r["name"].partition("+")[2] or "pristine"})
+    return rows
+
+
+def _rate(flags) -> str:
+    flags = list(flags)
+    k, n = int(sum(flags)), len(flags)
+    if n == 0:
+        return "–"
+    lo, hi = clopper_pearson(k, n)
+    return f"{k} of {n} ({100 * k / n:.0f} %, {100 * lo:.0f}-{100 * hi:.0f} %)"
+
+
+def auc_interval(neg, pos, *, n_boot: int = 2000, seed: int = 0):
+    """ROC AUC of ``pos`` above ``neg`` and its 95 % bootstrap interval."""
+    from sklearn.metrics import roc_auc_score
+
+    neg, pos = np.asarray(neg, float), np.asarray(pos, float)
+    y = np.r_[np.zeros(neg.size), np.ones(pos.size)]
+    auc = float(roc_auc_score(y, np.r_[neg, pos]))
+    rng = np.random.default_rng(seed)
+    boots = [roc_auc_score(y, np.r_[rng.choice(neg, neg.size), rng.choice(pos, pos.size)])
+             for _ in range(n_boot)]
+    return auc, tuple(float(q) for q in np.percentile(boots, [2.5, 97.5]))
+
+
+def tables(rows: list[dict], cal) -> str:
+    """The figures as markdown, photos judged by the calibration ``cal``."""
+    untouched = [r for r in rows if r["kind"] == "none"]
+    edited = [r for r in rows if r["kind"] != "none"]
+    alpha, line = cal.alpha, cal.line()
+    out = [f"line: statistic {line:.3f} (p = {alpha}; calibration of {cal.n} photos)", ""]
+    for key in ("channel", "preset"):
+        out += [f"| untouched, by {key} | called inconsistent (95 % interval) |", "|---|---|"]
+        by = defaultdict(list)
+        for r in untouched:
+            by[r[key]].append(r["statistic"] > line)
+        out += [f"| {k} | {_rate(v)} |" for k, v in sorted(by.items())]
+        out += [f"| all | {_rate(r['statistic'] > line for r in untouched)} |", ""]
+    neg = [r["statistic"] for r in untouched]
+    out += ["| kind | channel | caught (95 % interval) | AUC (95 % interval) | "
+            + " | ".join(f"AP {m}" for m in JUDGES) + " |",
+            "|---|---|---|---|" + "---|" * len(JUDGES)]
+    for kind in sorted({r["kind"] for r in edited}):
+        mine = [r for r in edited if r["kind"] == kind]
+        for ch in sorted({r["channel"] for r in mine}) + ["all"]:
+            rs = [r for r in mine if ch in ("all", r["channel"])]
+            auc = ""
+            if neg and rs:
+                a, (lo, hi) = auc_interval(neg, [r["statistic"] for r in rs])
+                auc = f"{a:.3f} ({lo:.3f}-{hi:.3f})"
+            aps = []
+            for m in JUDGES:
+                v = [r["metrics"].get(f"patch_ap_{m}") for r in rs]
+                v = [x for x in v if x is not None]
+                aps.append(f"{np.mean(v):.3f}" if v else "–")
+            out.append(f"| {kind} | {ch} | {_rate(r['statistic'] > line for r in rs)} | "
+                       f"{auc} | " + " | ".join(aps) + " |")
+    return "\n".join(out)
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    """ROC curves of the statistic per kind (every channel), untouched as negatives."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from sklearn.metrics import roc_curve
+
+    neg = [r["statistic"] for r in rows if r["kind"] == "none"]
+    fig, ax = plt.subplots(figsize=(5, 5), dpi=100)
+    for kind in sorted({r["kind"] for r in rows} - {"none"}):
+        pos = [r["statistic"] for r in rows if r["kind"] == kind]
+        y = np.r_[np.zeros(len(neg)), np.ones(len(pos))]
+        fpr, tpr, _ = roc_curve(y, np.r_[neg, pos])
+        auc, (lo, hi) = auc_interval(neg, pos)
+        ax.plot(fpr, tpr, label=f"{kind} (AUC {auc:.2f}, {lo:.2f}-{hi:.2f}; {len(pos)})")
+    ax.plot([0, 1], [0, 1], color="0.8", lw=1)
+    ax.set(xlabel=f"false alarms (untouched, {len(neg)} photos)", ylabel="caught",
+           title="image-level ROC of the verdict's statistic")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("bench", nargs="+", type=Path)
+    p.add_argument("--plot", type=Path, default=None)
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="a calibration.json (default: the package's)")
+    args = p.parse_args(argv)
+    rows = load_runs(args.bench)
+    print(tables(rows, load(args.calibration)))
+    if args.plot:
+        plot(rows, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,127 @@
+"""verify/calibration and benchmarks/calibrate_verdict: p-values from untouched photos.
+
+The tail model must give the false-alarm rate it is set for on samples it was not fitted
+on, p-values below the 1/(n+1) a rank allows, and an interval that covers a known rate;
+the verdict calls a photo inconsistent exactly when its p-value is below alpha; and the
+calibration refuses photos of another set.
+"""
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from scenes.errors import BadInput
+from verify import calibration, patches, verdict
+from verify_cases import make_scene
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "calibrate_verdict.py"
+_spec = importlib.util.spec_from_file_location("calibrate_verdict", _PATH)
+calibrate_verdict = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(calibrate_verdict)
+
+
+@pytest.mark.parametrize("dist", [stats.gamma(2.0, scale=0.3), stats.lognorm(0.5),
+                                  stats.genpareto(0.2)])
+def test_the_line_holds_its_rate_on_fresh_samples(dist):
+    rng = np.random.default_rng(1)
+    rates = []
+    for _ in range(40):
+        cal = calibration.fit_tail(dist.rvs(120, random_state=rng))
+        assert cal.p_value(cal.line()) == pytest.approx(cal.alpha, rel=1e-6)
+        rates.append(dist.sf(cal.line()))          # the true false-alarm rate it gives
+    # Set for 1 %: over many calibrations the true rate averages near it, never wild.
+    assert 0.004 < np.mean(rates) < 0.02, np.mean(rates)
+    assert max(rates) < 0.05
+
+
+def test_p_values_fall_with_the_statistic_and_below_the_rank():
+    t = stats.gamma(2.0, scale=0.3).rvs(120, random_state=np.random.default_rng(2))
+    cal = calibration.fit_tail(t)
+    grid = np.linspace(0.0, 3 * t.max(), 200)
+    p = np.array([cal.p_value(x) for x in grid])
+    assert np.all(np.diff(p) <= 1e-12) and p[0] == pytest.approx(1.0)
+    assert cal.p_value(2 * t.max()) < 1 / (cal.n + 1)
+    with pytest.raises(BadInput):
+        cal.p_value(float("nan"))
+    back = calibration.Calibration.from_json(json.loads(json.dumps(cal.to_json())))
+    assert back.line() == pytest.approx(cal.line(), rel=1e-5)
+
+
+def test_a_short_tail_is_not_bounded():
+    # Uniform statistics have a bounded tail (xi < 0); the model keeps xi = 0, so a
+    # statistic past the largest still has a p-value above zero.
+    cal = calibration.fit_tail(np.linspace(0.0, 1.0, 100))
+    assert cal.xi == 0.0 and 0.0 < cal.p_value(1.5) < cal.alpha
+
+
+def test_clopper_pearson_and_held_out_groups():
+    lo, hi = calibration.clopper_pearson(0, 60)
+    assert lo == 0.0 and hi == pytest.approx(1 - 0.025 ** (1 / 60), rel=1e-6)
+    lo, hi = calibration.clopper_pearson(5, 100)
+    assert lo < 0.05 < hi
+    t = stats.gamma(2.0, scale=0.3).rvs(150, random_state=np.random.default_rng(3))
+    t[:30] += 5.0                                    # one group far above the others
+    held = calibration.leave_one_group_out(t, np.repeat(list("abcde"), 30))
+    assert held["a"] == (30, 30) and held["all"][1] == 150
+    assert sum(held[g][0] for g in "bcde") <= 4
+
+
+def test_the_verdict_reports_the_p_values_beside_its_line():
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    cal = calibration.fit_tail(np.linspace(0.1, 2.0, 50))
+    base = np.full((10, 10), 0.1)
+    for bump in (0.05, 0.3, 0.6):
+        s = base.copy()
+        s[0, :3] += bump
+        d = verdict.decide({"RANGE": s}, np.ones_like(s), g, thresholds={"RANGE": 0.1},
+                           calibration=cal)
+        assert d.statistic == pytest.approx(bump / 0.1) == pytest.approx(d.score)
+        assert d.p_value == pytest.approx(cal.p_value(d.statistic))
+        assert d.line_p_value == pytest.approx(cal.p_value(1.0))
+        assert (d.verdict == "inconsistent") == (d.score > 1.0)
+        assert (d.p_value < d.line_p_value) == (d.score > 1.0)
+
+
+def _bench(tmp_path, rows):
+    """A bench folder of finished checks: (name, preset, seed, statistic) each."""
+    runs = []
+    for name, preset, seed, stat in rows:
+        scene = tmp_path / "set" / name
+        (scene / "truth").mkdir(parents=True)
+        (scene / "truth" / "scene.json").write_text(json.dumps(
+            {"preset": preset, "seed": seed, "totems": [{}] * 4}))
+        rep = tmp_path / "bench" / "runs" / f"{name}-joint" / "verify" / "report.json"
+        rep.parent.mkdir(parents=True)
+        rep.write_text(json.dumps({"statistic": stat}))
+        runs.append({"scene": str(scene), "name": name, "mode": "joint", "status": "ok"})
+    (tmp_path / "bench" / "bench.json").write_text(json.dumps({"runs": runs}))
+    return tmp_path / "bench"
+
+
+def test_the_calibration_refuses_the_benchmarks_seeds(tmp_path, capsys):
+    ok = [(f"{p}-{s}" + ("+jpeg75" if s > 14 else ""), p, s, 0.01 * s * (1 + k))
+          for k, p in enumerate(("box", "envmap", "window")) for s in range(11, 19)]
+    bench = _bench(tmp_path / "a", ok)
+    out = tmp_path / "cal.json"
+    assert calibrate_verdict.main([str(bench), "--write", str(out)]) == 0
+    cal = calibration.load(out)
+    assert cal.n == 24 and cal.source["channels"] == ["jpeg75", "pristine"]
+    printed = capsys.readouterr().out
+    assert "| box | 8 |" in printed and "| jpeg75 | 12 |" in printed
+
+    bench = _bench(tmp_path / "b", ok + [("box-3", "box", 3, 0.2)])
+    assert calibrate_verdict.main([str(bench)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "box seed 3 belongs to benchmark" in err
+
+
+def test_the_shipped_calibration_reads():
+    cal = calibration.load()
+    assert cal.n >= 60 and cal.source["set"] == "calibration"
+    assert len(cal.source["presets"]) == 5 and len(cal.source["channels"]) == 7
+    assert cal.p_value(cal.line()) == pytest.approx(calibration.ALPHA, rel=1e-6)
