@@ -1,9 +1,10 @@
 """Verify a scene against its fit: region, heatmaps, verdict, metrics, and the files.
 
 ``verify_scene`` turns a scene and a fit into a :class:`Report` (values only);
-``write_verify`` writes the ``verify/`` files of the contract. The key (totem radius and
-IoR) is used for the silhouettes of ``mask_iou`` and is never written: the report carries
-only ``folder.key_fingerprint``.
+``write_verify`` writes the ``verify/`` files of the contract, report.html
+(:mod:`verify.html_report`) among them. The key (totem radius and IoR) is used for the
+silhouettes of ``mask_iou`` and is never written: the report carries only
+``folder.key_fingerprint``, and report.html draws the silhouettes as outlines.
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ import numpy as np
 from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.errors import BadInput
-from verify import absence, corroborate, patches, region, verdict as verdict_mod
+from verify import absence, corroborate, html_report, patches, region
+from verify import verdict as verdict_mod
 
 __all__ = ["VIS_FLOOR", "Report", "sphere_silhouette", "mask_iou", "verify_scene",
-           "write_verify"]
+           "vis_max", "write_verify"]
 
 VIS_FLOOR = {"L1": 0.2, "SSIM": 0.5, "CHROMA": 0.1, "RANGE": 0.1, "CORROB": 0.1,
              "UNSEEN": 0.1, "ABSENT": 0.1}
@@ -38,7 +40,10 @@ class Report:
 
     Arrays: ``protected`` (H, W) bool; ``recon``, ``image`` (H, W, 3) sRGB [0, 1];
     ``totem_mask`` (H, W) bool; ``heatmaps[name]`` (G, G) in heatmap.npy units (see
-    :mod:`verify.patches`); ``keep`` (G, G) patches overlapping the protected region.
+    :mod:`verify.patches`); ``keep`` (G, G) patches overlapping the protected region;
+    ``silhouettes`` (n, H, W) bool, each fitted sphere's image (the outlines report.html
+    draws; None when unknown). ``scene_name``: the scene folder's name, for report.html.
+    Neither is in report.json.
     """
 
     verdict: str
@@ -59,6 +64,9 @@ class Report:
     region: str = "filled"
     timing_s: dict = field(default_factory=dict)
     versions: dict = field(default_factory=dict)
+    skipped: dict = field(default_factory=dict)
+    silhouettes: np.ndarray | None = None
+    scene_name: str = ""
 
     @property
     def drivers(self) -> list:
@@ -67,7 +75,9 @@ class Report:
     def to_json(self) -> dict:
         """report.json: the contract's fields plus ``scores`` (each metric's own score,
         threshold and median patch; ``score`` is the largest score / threshold),
-        ``drivers``, ``key_fingerprint``, ``region`` (the protected region's shape) and a
+        ``statistic``, ``p_value`` and ``line_p_value`` (the calibration's,
+        :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
+        protected region's shape) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -81,10 +91,18 @@ class Report:
             "scores": {m: {"score": _num(v), "threshold": _num(self.decision.thresholds[m]),
                            "median": _num(self.decision.medians[m])}
                        for m, v in self.decision.scores.items()},
+            "statistic": _num(self.decision.statistic),
+            "p_value": _p(self.decision.p_value),
+            "line_p_value": _p(self.decision.line_p_value),
+            "skipped": self.skipped,
             "drivers": self.drivers,
             "key_fingerprint": self.key_fingerprint,
             "region": self.region,
         }
+
+
+def _p(x):
+    return None if x is None else float(f"{x:.4g}")
 
 
 def _num(x):
@@ -123,7 +141,7 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
 
 def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                  thresholds: dict | None = None, versions: dict | None = None,
-                 region_shape: str = "filled") -> Report:
+                 region_shape: str = "filled", calibration="shipped") -> Report:
     """Compare the photo with the fit's re-rendered camera view.
 
     Parameters
@@ -133,7 +151,9 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         ``totem_points`` (m, 3) camera frame m, ``centers`` (n, 3), ``initial`` (n, 3)
         or None, optional ``timings`` dict).
     truth : ground truth of a synthetic scene, for recon_L1 and pose_L1 (else null).
-    thresholds : {metric: threshold} overriding ``verdict.THRESHOLDS``.
+    thresholds : {metric: scale} overriding ``verdict.THRESHOLDS``.
+    calibration : the verdict's calibration (:func:`verify.verdict.decide`): the
+        shipped one by default, a :class:`verify.calibration.Calibration`, or None.
     versions : extra version info for the report (e.g. ``backend.describe()``).
     region_shape : "filled" (default) or "hull", the paper's protected region
         (:func:`verify.region.protected_region`).
@@ -168,7 +188,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
 
     # verdict on patch scores over protected, non-totem pixels (sRGB [0, 1])
     inside = patches.patch_scores(errors, grid, seen)
-    decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds)
+    decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds,
+                                  calibration=calibration)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None}
@@ -185,12 +206,13 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
             metrics["pose_L1"] = float(np.abs(np.asarray(fit.centers, float) - true_pose)
                                        .sum(axis=1).mean())
 
-    totems = []
+    totems, silhouettes = [], []
     centers = np.asarray(fit.centers, dtype=np.float64)
     initial = getattr(fit, "initial", None)
     initial = None if initial is None else np.asarray(initial, dtype=np.float64)
     for j, mask in enumerate(np.asarray(scene.masks, bool)):
         sil = sphere_silhouette(centers[j], float(scene.radius[j]), scene.K, (H, W))
+        silhouettes.append(sil)
         totems.append({
             "center": [round(float(x), 6) for x in centers[j]],
             "initial": None if initial is None else [round(float(x), 6)
@@ -206,7 +228,24 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         image=image, totem_mask=totem_mask, grid=grid, heatmaps=heat, keep=keep,
         decision=decision, totems=totems, metrics=metrics,
         key_fingerprint=folder.key_fingerprint(scene.radius, scene.ior), region=region_shape,
-        timing_s=timing, versions={**_versions(), **(versions or {})})
+        timing_s=timing, versions={**_versions(), **(versions or {})},
+        skipped=_skipped(decision, scene.n_totems),
+        silhouettes=np.stack(silhouettes) if silhouettes else None,
+        scene_name=Path(scene.path).resolve().name)
+
+
+def _skipped(decision, n_totems: int) -> dict:
+    """{metric: why} for the verdict's metrics that judged no patch of this photo."""
+    out = {}
+    for m in verdict_mod.THRESHOLDS:
+        if m in decision.scores:
+            continue
+        if m == "ABSENT" and n_totems < absence.MIN_TOTEMS:
+            out[m] = (f"needs {absence.MIN_TOTEMS} totems to see one point; "
+                      f"the photo has {n_totems}")
+        else:
+            out[m] = "no patch of the protected region has a value"
+    return out
 
 
 def _check_fit(scene, fit) -> np.ndarray:
@@ -239,24 +278,34 @@ def _versions() -> dict:
 
 # --------------------------------------------------------------------------- files
 
+def vis_max(report: Report, name: str) -> float:
+    """Top of heatmap ``name``'s colour scale (heatmap.npy units): its largest kept
+    patch, at least ``VIS_FLOOR[name]``."""
+    heat = report.heatmaps[name]
+    vals = heat[report.keep & np.isfinite(heat)]
+    return max(float(vals.max()) if vals.size else 0.0, VIS_FLOOR[name])
+
+
 def write_verify(report: Report, out_dir) -> Path:
     """Write the verify/ files of the contract into ``out_dir``; report.json last.
 
-    Each file is written atomically; report.json is written after the pictures, so a
-    folder with a report.json is complete. Returns the path of report.json.
+    Each file is written atomically; report.html just before report.json, after the
+    pictures, so a folder with a report.json is complete. Returns the path of
+    report.json.
     """
     out = Path(out_dir)
     folder.write_image(out / "protect_mask.png", report.protected)
     folder.write_image(out / "recon.png", report.recon)
+    overlays = {}
     for name, heat in report.heatmaps.items():
-        vals = heat[report.keep & np.isfinite(heat)]
-        vmax = max(float(vals.max()) if vals.size else 0.0, VIS_FLOOR[name])
+        vmax = vis_max(report, name)
+        overlays[name] = (vmax, patches.heatmap_overlay(
+            report.image, heat, report.grid, report.protected, report.totem_mask, vmax))
         folder.write_npy(out / name / "heatmap.npy", heat.astype(np.float64))
         folder.write_image(out / name / "heatmap_vis.png",
                            patches.heatmap_vis(heat, report.grid, vmax))
-        folder.write_image(out / name / "heatmap_overlay.png",
-                           patches.heatmap_overlay(report.image, heat, report.grid,
-                                                   report.protected, report.totem_mask,
-                                                   vmax))
+        folder.write_image(out / name / "heatmap_overlay.png", overlays[name][1])
+    page = html_report.render_report(report, overlays)
+    folder.write_bytes(out / "report.html", page.encode("utf-8"))
     folder.write_json(out / "report.json", report.to_json())
     return out / "report.json"
