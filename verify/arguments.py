@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size", "size_any", "region", "point", "positive"]
+__all__ = ["size", "size_any", "region", "point", "positive", "engine", "tls"]
 
 
 def size(text: str) -> tuple[int, int]:
@@ -50,3 +50,27 @@ def positive(kind):
             raise argparse.ArgumentTypeError(f"must be positive, got {text}")
         return v
     return parse
+
+
+def engine(v) -> None:
+    """Options of the verbs that run batches on Dask (bench, check DIR...):
+    ``verify.batch``."""
+    v.add_argument("--jobs", type=positive(int), default=1,
+                   help="photos run at once: workers of the local Dask cluster (default 1; "
+                        "not used with --scheduler)")
+    v.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on the existing Dask cluster of this scheduler (tcp://HOST:8786 "
+                        "or tls://...); its workers must see the scene folders and --out at "
+                        "the same paths and run the same totems")
+    v.add_argument("--tls-ca-file", default=None, metavar="PEM",
+                   help="with a tls:// scheduler: the CA certificate (else Dask's "
+                        "configuration, distributed.comm.tls.*)")
+    v.add_argument("--tls-cert", default=None, metavar="PEM",
+                   help="with a tls:// scheduler: this client's certificate")
+    v.add_argument("--tls-key", default=None, metavar="PEM",
+                   help="with a tls:// scheduler: this client's private key")
+
+
+def tls(args) -> tuple[str | None, str | None, str | None]:
+    """(CA file, certificate, key) of the ``engine`` options."""
+    return args.tls_ca_file, args.tls_cert, args.tls_key

@@ -1,7 +1,9 @@
 """``totems bench``: run check over many scene folders and write the paper's tables.
 
-Each scene runs in its own process (``totems check ... --json``), so a scene that fails,
-even by a crash of the backend, is recorded as failed and the others go on. Untouched
+Each scene runs in its own process (``totems check ... --json``) on a worker of a Dask
+cluster (:mod:`verify.batch`), so a scene that fails, even by a crash of the backend, is
+recorded as failed and the others go on; a bench run again into its folder reads back
+the runs it finished (:mod:`verify.runs`). Untouched
 synthetic scenes are also fitted with the initial pose kept fixed and with the true pose
 (oracle), which gives the three rows of the paper's Table 1.
 
@@ -12,7 +14,8 @@ manipulations that leave the totems alone (colour, splice, inpaint, remove, inse
 cost a verify each, not a fit; ``refit=True`` fits every scene anyway.
 
 Outputs (``OUT/``): ``bench.json`` (every run), ``bench.csv`` (one row a run),
-``bench.md`` (the tables beside the paper's figures), ``plots/*.png``.
+``bench.md`` (the tables beside the paper's figures), ``plots/*.png``, ``bench.html``
+(bench.md's tables and the plots in one self-contained page, :mod:`verify.html_report`).
 """
 
 from __future__ import annotations
@@ -20,22 +23,20 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import subprocess
-import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
+from verify.batch import Engine
 from verify.patches import METRICS
+from verify.runs import Run, run_all
 from verify.verdict import THRESHOLDS
 
 __all__ = ["PAPER_TABLE1", "PAPER_TABLE2", "PAPER_TOTEMS", "MODES", "find_scenes",
-           "describe_scene", "modes_for", "fingerprint", "plan", "run_check",
+           "describe_scene", "modes_for", "fingerprint", "plan", "bench_runs",
            "run_bench", "summarise", "markdown", "CSV_FIELDS", "csv_text",
            "write_outputs", "write_plots"]
 
@@ -122,90 +123,62 @@ def plan(scenes: list[dict], refit: bool = False) -> list[tuple[dict, dict | Non
     return [(info, leader_of[info["scene"]]) for info in scenes]
 
 
-def run_check(scene: Path, out: Path, mode: str, timeout: float,
-              fit_dir: Path | None = None) -> dict:
-    """Run ``totems check`` on one scene in a fresh process (``totems verify --fit
-    fit_dir`` when another scene's fit serves it); never raises."""
-    if fit_dir is None:
-        cmd = [sys.executable, "-m", "verify.cli", "check", str(scene), "--out", str(out),
-               "--json", "--quiet", *MODES[mode]]
-    else:
-        cmd = [sys.executable, "-m", "verify.cli", "verify", str(scene), "--fit",
-               str(fit_dir), "--out", str(out), "--json", "--quiet"]
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    except subprocess.TimeoutExpired:
-        return {"status": "failed", "error": f"timed out after {timeout:.0f} s"}
-    wall = time.perf_counter() - t0
-    if proc.returncode in (0, 1):
-        try:
-            summary = json.loads(proc.stdout.strip().splitlines()[-1])
-        except (ValueError, IndexError):
-            return {"status": "failed", "error": "check printed no JSON summary",
-                    "wall_s": wall}
-        return {"status": "ok", "wall_s": wall, **summary}
-    err = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
-    return {"status": "failed", "error": err, "exit_code": proc.returncode, "wall_s": wall}
+def bench_runs(planned: list[tuple[dict, dict | None]], out: Path,
+               table1: bool) -> list[Run]:
+    """The runs of a bench: each mode of a scene that fits, then (``joint``) each scene
+    that reuses its leader's joint fit, in ``OUT/runs/<name>-<mode>/``."""
+    joint, runs = {}, []
+    for info, leader in planned:
+        if leader is None:
+            for mode in modes_for(info, table1):
+                run = Run(info, mode, out / "runs" / f"{info['name']}-{mode}",
+                          check_flags=tuple(MODES[mode]))
+                joint.setdefault(info["scene"], run)
+                runs.append(run)
+    for info, leader in planned:
+        if leader is not None:
+            runs.append(Run(info, "joint", out / "runs" / f"{info['name']}-joint",
+                            leader=joint[leader["scene"]]))
+    return runs
 
 
 def run_bench(roots, out, *, jobs: int = 1, table1: bool = True, timeout: float = 3600,
-              refit: bool = False, reverify: bool = False, progress: bool = False) -> dict:
+              refit: bool = False, reverify: bool = False, progress: bool = False,
+              scheduler: str | None = None, tls=None) -> dict:
     """Run every scene under ``roots``; write bench.json/csv/md and plots in ``out``.
 
-    Two rounds: the scenes that fit (every mode), then those that reuse a leader's joint
-    fit (``plan``); a scene whose leader failed fits itself. With ``reverify`` a run
-    whose fit is already in ``out`` (an earlier bench's) is verified again on it
-    instead of fitted: what a change to ``verify/`` alone needs. Its fit times are
-    then the fit's own (``fit.json``) and ``fit`` (wall) is not measured.
+    The runs go to a Dask cluster (:mod:`verify.batch`: ``jobs`` local workers, or the
+    one at ``scheduler``, with ``tls`` = (ca file, cert, key)); those that reuse a
+    leader's joint fit (``plan``) follow it, and a scene whose leader failed fits itself
+    (:func:`verify.runs.run_all`). A run an earlier bench finished in ``out`` with the
+    same code is read back (``resumed``). With ``reverify`` a run whose fit is already
+    in ``out`` is verified again on it instead of fitted: what a change to ``verify/``
+    alone needs. Its fit times are then the fit's own (``fit.json``) and ``fit`` (wall)
+    is not measured.
     """
     out = Path(out)
     scenes = [describe_scene(s) for s in find_scenes(roots)]
-    planned = plan(scenes, refit)
-
-    def run_dir(info, mode):
-        return out / "runs" / f"{info['name']}-{mode}"
-
-    def one(task):
-        info, mode, leader = task
-        fit_dir = None if leader is None else run_dir(leader, "joint") / "fit"
-        own = run_dir(info, mode) / "fit"
-        again = reverify and leader is None and (own / "fit.json").is_file()
-        record = run_check(Path(info["scene"]), run_dir(info, mode), mode, timeout,
-                           own if again else fit_dir)
-        if leader is not None:
-            record["fit_from"] = leader["name"]
-        if again:
-            record["reverified"] = True
-        return {**info, "mode": mode, **record}
-
-    first = [(i, m, None) for i, ld in planned if ld is None for m in modes_for(i, table1)]
+    runs = bench_runs(plan(scenes, refit), out.resolve(), table1)   # workers' cwd differ
     t0 = time.perf_counter()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        reusing = sum(ld is not None for _, ld in planned)
-        bar = tqdm(total=len(first) + reusing, desc="bench", unit="run")
-    runs = []
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        for r in pool.map(one, first):
-            runs.append(r)
-            bar and bar.update()
-        ok = {r["scene"] for r in runs if r["mode"] == "joint" and r["status"] == "ok"}
-        second = [(i, "joint", ld if ld["scene"] in ok else None)
-                  for i, ld in planned if ld is not None]
-        for r in pool.map(one, second):
-            runs.append(r)
-            bar and bar.update()
-    if bar:
-        bar.close()
+    with Engine(scheduler=scheduler, jobs=jobs, tls=tls, timeout=timeout) as engine:
+        engine.preflight([s["scene"] for s in scenes], out)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=len(runs), desc="bench", unit="run")
+        records = run_all(engine, runs, reverify=reverify,
+                          on_record=None if bar is None else (lambda r: bar.update()))
+        if bar:
+            bar.close()
     order = {s["scene"]: k for k, s in enumerate(scenes)}
-    runs.sort(key=lambda r: (order[r["scene"]], list(MODES).index(r["mode"])))
-    bench = {"runs": runs, "summary": summarise(runs), "jobs": jobs, "refit": refit,
-             "reverified": sum(1 for r in runs if r.get("reverified")),
+    records.sort(key=lambda r: (order[r["scene"]], list(MODES).index(r["mode"])))
+    bench = {"runs": records, "summary": summarise(records), "jobs": engine.slots,
+             "scheduler": scheduler or "local", "refit": refit,
+             "reverified": sum(1 for r in records if r.get("reverified")),
+             "resumed": sum(1 for r in records if r.get("resumed")),
              "wall_s": round(time.perf_counter() - t0, 1), "scenes": len(scenes),
-             "fits": sum(1 for r in runs if "fit_from" not in r and not r.get("reverified"))}
+             "fits": sum(1 for r in records if "fit_from" not in r
+                         and not r.get("reverified") and not r.get("resumed"))}
     write_outputs(bench, out)
     return bench
 
@@ -287,6 +260,8 @@ def markdown(bench: dict) -> str:
              *([f"{bench['reverified']} fits were an earlier bench's, verified again "
                 f"(`--reverify`): their times are those of that bench.\n"]
                if bench.get("reverified") else []),
+             *([f"{bench['resumed']} runs were an earlier bench's in this folder, read "
+                f"back: their times are that bench's.\n"] if bench.get("resumed") else []),
              "## Table 1: camera-view reconstruction and pose (untouched scenes)\n",
              "| preset | totem pose | recon L1 | paper | pose L1 (m) | paper | n |",
              "|---|---|---|---|---|---|---|"]
@@ -345,24 +320,34 @@ def csv_text(runs: list[dict]) -> str:
 
 
 def write_outputs(bench: dict, out: Path) -> None:
+    """bench.json, bench.csv, bench.md, plots/ and bench.html (last) in ``out``."""
+    from verify import html_report
+
+    md = markdown(bench)
     folder.write_json(out / "bench.json", bench)
     folder.write_bytes(out / "bench.csv", csv_text(bench["runs"]).encode())
-    folder.write_bytes(out / "bench.md", markdown(bench).encode())
-    write_plots(bench["summary"], out / "plots")
+    folder.write_bytes(out / "bench.md", md.encode())
+    plots = write_plots(bench["summary"], out / "plots")
+    folder.write_bytes(out / "bench.html", html_report.render_bench(md, plots).encode())
 
 
-def write_plots(summary: dict, out: Path) -> None:
-    """AP per kind, recon L1 per preset and mode, time per stage, the totem study."""
+def write_plots(summary: dict, out: Path) -> dict:
+    """AP per kind, recon L1 per preset and mode, time per stage, the totem study.
+
+    Returns {file name: PNG bytes} of the plots written (those with data)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    written = {}
 
     def save(fig, name):
         buf = io.BytesIO()
         fig.tight_layout()
         fig.savefig(buf, format="png", dpi=100)
         plt.close(fig)
-        folder.write_bytes(out / name, buf.getvalue())
+        written[name] = buf.getvalue()
+        folder.write_bytes(out / name, written[name])
 
     t2 = summary["table2"]
     if t2:
@@ -411,3 +396,4 @@ def write_plots(summary: dict, out: Path) -> None:
         ax.set_ylabel("recon L1")
         ax.legend()
         save(fig, "totems_study.png")
+    return written

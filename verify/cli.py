@@ -87,7 +87,7 @@ def _fit(args, scene):
         true_pose = truth.totem_pose
     from inverse.fit import FitSettings
 
-    settings = FitSettings(pose_from=getattr(args, "pose_from", "mask"))
+    settings = FitSettings(pose_from=getattr(args, "pose_from", "photo"))
     result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
                        true_pose=true_pose, progress=_progress(args), settings=settings)
     fit_dir = _out_dir(args) / "fit"
@@ -139,6 +139,10 @@ def cmd_verify(args) -> dict:
 def cmd_check(args) -> dict:
     from scenes.folder import read_scene
 
+    if len(args.scene) > 1 or args.scheduler:      # many photos: verify/checks.py
+        from verify.checks import from_args
+        return from_args(args)
+    args.scene = args.scene[0]
     scene = read_scene(args.scene)
     t0 = time.perf_counter()
     fit, _ = _fit(args, scene)
@@ -149,8 +153,8 @@ def cmd_bench(args) -> dict:
     from verify.bench import run_bench
 
     bench = run_bench(args.dirs, args.out, jobs=args.jobs, table1=not args.no_table1,
-                      refit=args.refit, reverify=args.reverify,
-                      progress=_progress(args))
+                      refit=args.refit, reverify=args.reverify, progress=_progress(args),
+                      scheduler=args.scheduler, tls=arguments.tls(args))
     return {"bench": str(args.out), "scenes": bench["scenes"],
             "failed": len(bench["summary"]["failed"]), "wall_s": bench["wall_s"]}
 
@@ -209,7 +213,11 @@ def _print_summary(verb: str, summary: dict) -> None:
         extras = ", ".join(f"{k} {v:.3f}" for k, v in m.items() if v is not None)
         each = ", ".join(f"{k} {v['score']:.3f} of {v['threshold']:.3f}"
                          for k, v in summary.get("scores", {}).items())
-        print(f"{summary['verdict']}: score {summary['score']:.2f} of "
+        p = summary.get("p_value")
+        odds = "" if p is None else (f"p = {p:.2g} (the chance an untouched photo "
+                                     f"scores this high; {summary['line_p_value']:.2g} "
+                                     f"at the threshold), ")
+        print(f"{summary['verdict']}: {odds}score {summary['score']:.2f} of "
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
@@ -231,17 +239,19 @@ def _region_argument(v) -> None:
                         "the NeRF path)")
 
 
-def _fit_arguments(v) -> None:
-    """Arguments shared by the verbs that fit: fit and check."""
-    v.add_argument("scene")
-    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
+def _fit_arguments(v, many: bool = False) -> None:
+    """Arguments shared by the verbs that fit: fit and check (``many``: SCENE...)."""
+    v.add_argument("scene", nargs="+" if many else None)
+    v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out"
+                   + ("; with several SCENEs check-out)" if many else ")"))
     v.add_argument("--fixed-pose", action="store_true",
                    help="keep the totem centres at their initialisation")
     v.add_argument("--oracle-pose", action="store_true",
                    help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
-    v.add_argument("--pose-from", choices=("mask", "photo"), default="mask",
-                   help="the totems' initial pose from the masks' outlines (default), or "
-                        "from the rims' edges in the photo near them (hand-drawn masks)")
+    v.add_argument("--pose-from", choices=("photo", "mask"), default="photo",
+                   help="the totems' initial pose from the rims' edges in the photo near "
+                        "each mask (default: masks as people draw them), or from the "
+                        "masks' own outlines (pixel-exact masks)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -336,14 +346,16 @@ def _check_verbs(verb) -> None:
     v.add_argument("--out", default=None, help="output folder (default SCENE/totems-out)")
     _region_argument(v)
 
-    v = verb("check", cmd_check, "fit, then verify: the one-shot fit-and-compare")
-    _fit_arguments(v)
+    v = verb("check", cmd_check, "fit, then verify: the one-shot fit-and-compare; with "
+             "several SCENEs each on a Dask cluster, and an index (OUT default check-out)")
+    _fit_arguments(v, many=True)
     _region_argument(v)
+    arguments.engine(v)
 
     v = verb("bench", cmd_bench, "run check over many scene folders and write the tables")
     v.add_argument("dirs", nargs="+", help="folders holding scene folders")
     v.add_argument("--out", default="bench-out", help="output folder (default bench-out)")
-    v.add_argument("--jobs", type=arguments.positive(int), default=1, help="scenes run at once")
+    arguments.engine(v)
     v.add_argument("--no-table1", action="store_true",
                    help="skip the initial-pose and oracle-pose fits of untouched scenes")
     v.add_argument("--refit", action="store_true",
@@ -429,7 +441,7 @@ def main(argv=None) -> int:
         _print_summary(args.verb, summary)
     if summary.get("verdict") == "inconsistent":
         return EXIT_INCONSISTENT
-    return EXIT_OK
+    return summary.get("exit_code", EXIT_OK)      # check SCENE...: its photos' worst
 
 
 if __name__ == "__main__":
