@@ -228,9 +228,9 @@ def _initial_pose(scene, K, radius, true_pose, fixed_pose, pose_from: str = "pho
 
 
 def _outline(scene, K, radius, initial, settings):
-    """The joint fit's pose term: towards the masks' outlines, or (``pose_from`` photo)
-    towards the outlines of the centres the rim's edges gave."""
-    if settings.pose_from == "photo":
+    """The joint fit's pose term: towards the masks' outlines, or (``pose_from`` photo,
+    when the rims gave the initial centres) towards those centres' outlines."""
+    if settings.pose_from == "photo" and scene.initial_pose is None:
         from inverse.rim import outline
 
         uv = [outline(P, float(r), K)[0] for P, r in zip(initial, radius)]

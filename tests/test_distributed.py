@@ -94,7 +94,8 @@ def batch_run(tmp_path_factory):
     copy with a broken key; checked as a batch on a two-worker LocalCluster."""
     root = tmp_path_factory.mktemp("batch")
     photo = make_scene(root / "env-1", preset="envmap", seed=1, size=(64, 48), spp=4)
-    edit = tamper(photo, root / "env-1-color", kind="color", seed=1)
+    edit = tamper(photo, root / "env-1-color", kind="color", seed=1,
+                  region=_away_from_the_totems(photo))
     broken = root / "env-1-broken"
     shutil.copytree(photo, broken)
     (broken / "totems.json").write_text(json.dumps({"radius": -0.1, "ior": 1.52}))
@@ -102,6 +103,24 @@ def batch_run(tmp_path_factory):
     args = ("check", photo, edit, broken, "--out", out, "--jobs", "2")
     return {"root": root, "scenes": (photo, edit, broken), "out": out, "args": args,
             "proc": totems(*args)}
+
+
+def _away_from_the_totems(scene_dir, side=8):
+    """(x, y, w, h) of a square outside the band the fit reads around the totem masks
+    (so the edit shares the photo's fit)."""
+    from scipy.ndimage import binary_dilation
+
+    from inverse.rim import READ_PX
+    from scenes import folder
+
+    masks = folder.read_scene(scene_dir).masks.any(0)
+    read = binary_dilation(masks, iterations=READ_PX)
+    H, W = read.shape
+    for y in range(0, H - side + 1):
+        for x in range(0, W - side + 1):
+            if not read[y:y + side, x:x + side].any():
+                return (x, y, side, side)
+    raise AssertionError("no room for an edit away from the totems")
 
 
 @pytest.mark.slow
