@@ -27,15 +27,18 @@ def run(*args) -> int:
 
 
 def _verdict(scene: Path) -> str:
-    """'consistent\nRANGE 0.060/0.140  UNSEEN 0.003/0.062 ...' (each judging metric's
-    score over its threshold) from the scene's report.json, or ''."""
+    """'consistent (p = 0.79)\nRANGE 0.060/0.140  UNSEEN 0.003/0.062 ...' (the
+    verdict, its p-value, each judging metric's score over its threshold) from the
+    scene's report.json, or ''."""
     path = scene / "totems-out/verify/report.json"
     if not path.is_file():
         return ""
     r = json.loads(path.read_text())
     each = "  ".join(f"{k} {v['score']:.3f}/{v['threshold']:.3f}"
                      for k, v in r.get("scores", {}).items())
-    return f"{r['verdict']}\n{each}"
+    p = r.get("p_value")
+    odds = "" if p is None else f" (p = {p:.2g})"
+    return f"{r['verdict']}{odds}\n{each}"
 
 
 def picture(untouched: Path, tampered: Path, out: Path) -> None:
