@@ -2,9 +2,9 @@
 
     python benchmarks/make_set.py --set calibration --out CAL --jobs 2
     totems bench CAL --out BENCH --jobs 2 --no-table1      # or --reverify after verify/
-    python benchmarks/calibrate_verdict.py BENCH [--write verify/calibration.json]
+    python benchmarks/calibrate_verdict.py BENCH... [--write verify/calibration.json]
 
-Reads every untouched photo's statistic (``report.json`` ``statistic``) from a bench of
+Reads every untouched photo's statistic (``report.json`` ``statistic``) from benches of
 the calibration set, refuses photos that are manipulated or whose seed belongs to
 another set (``benchmarks/sets.py``: a figure is never reported on what it was
 calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
@@ -61,10 +61,15 @@ def collect(bench_dir) -> list[dict]:
 
 
 def check_rows(rows: list[dict], set_name: str = "calibration") -> None:
-    """Refuse rows a calibration must not see: manipulated photos, statistics missing
-    (a bench of older code: rerun it with ``--reverify``) and seeds outside the set."""
+    """Refuse rows a calibration must not see: a photo twice, manipulated photos,
+    statistics missing (a bench of older code: rerun it with ``--reverify``) and seeds
+    outside the set."""
     if not rows:
         raise BadInput("no checked photo to calibrate on")
+    names = [r["name"] for r in rows]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise BadInput(f"{twice[0]} is in two benches; a photo counts once")
     for r in rows:
         if r["manipulated"]:
             raise BadInput(f"{r['name']} is manipulated; the calibration takes untouched "
@@ -115,12 +120,13 @@ def report(rows: list[dict], cal: calibration.Calibration) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("bench", type=Path, help="output folder of `totems bench` on the set")
+    p.add_argument("bench", type=Path, nargs="+",
+                   help="output folders of `totems bench` on the set")
     p.add_argument("--write", type=Path, default=None,
                    help="write the calibration here (the package's: verify/calibration.json)")
     args = p.parse_args(argv)
     try:
-        rows = collect(args.bench)
+        rows = [row for bench in args.bench for row in collect(bench)]
         check_rows(rows)
     except BadInput as e:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
