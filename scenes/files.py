@@ -12,6 +12,7 @@ file that looks finished.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import os
@@ -112,8 +113,10 @@ def write_bytes(path, data: bytes) -> None:
         raise
 
 
+@functools.lru_cache(maxsize=1)
 def _umask() -> int:
-    """The process's umask (read by setting it and putting it back)."""
+    """The process's umask, read once (reading it means setting it and putting it back,
+    which is not safe while other threads create files)."""
     mask = os.umask(0o022)
     os.umask(mask)
     return mask

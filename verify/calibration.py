@@ -13,8 +13,9 @@ tail (the ``n - k``-th smallest, ``k = ceil(TAIL_FRACTION n)``) and a generalise
 Pareto tail (``xi``, ``sigma``) fitted to the ``k`` excesses over ``u`` by maximum
 likelihood (peaks over threshold), so that p-values below the ``1 / (n + 1)`` a rank
 allows are estimated rather than clipped. ``xi`` is kept >= 0: no bounded tail is
-claimed from a few dozen photos. The photo is called inconsistent when ``p < ALPHA``,
-i.e. ``T`` above the ``line`` where ``p = ALPHA``.
+claimed from a few dozen photos. ``line(ALPHA)`` is the statistic where ``p = ALPHA``;
+the verdict reports p beside its own fixed line and does not decide by it (see
+docs/decisions.md, 'verdict: p-values reported, the line kept').
 
 The calibration the package ships (``calibration.json`` beside this module) is written
 by ``benchmarks/calibrate_verdict.py`` from a bench of the calibration set
@@ -38,7 +39,7 @@ __all__ = ["ALPHA", "TAIL_FRACTION", "SHIPPED", "Calibration", "fit_tail", "load
            "statistic_of", "clopper_pearson", "leave_one_group_out"]
 
 ALPHA = 0.01
-"""The per-photo false-alarm rate the verdict is set for."""
+"""The per-photo false-alarm rate a calibrated line is computed for (benchmarks)."""
 
 TAIL_FRACTION = 0.3
 """Share of the calibration photos whose excesses the tail model is fitted to."""
