@@ -27,24 +27,6 @@ from pathlib import Path
 import numpy as np
 
 
-def true_depth(desc: dict) -> np.ndarray:
-    """Camera-frame z (metres) of the first surface along each pixel's ray, the
-    scene rendered without totems; inf where the ray meets nothing."""
-    from scenes import backend, render
-
-    dr, mi = backend.modules()
-
-    W, H = (int(s) for s in desc["size"])
-    scene = mi.load_dict(render.scene_dict(desc, spp=1, totems=False)[0])
-    idx = dr.arange(mi.UInt32, W * H)
-    pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
-    ray, _ = scene.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(ray)
-    z = np.array(si.t * ray.d.z, np.float64)
-    z[~np.array(si.is_valid())] = np.inf
-    return z.reshape(H, W)
-
-
 def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     """The camera view splatted from the totem rays (true centres) at the true depth,
     the rays' brightness against the truth where they meet that surface (ratio of
@@ -56,6 +38,7 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     from inverse.splat import _pixels, splat_image, surface_hits
     from scenes import backend
     from scenes.colour import linear_to_srgb, srgb_to_linear
+    from scenes.render import depth_map
 
     mi = backend.modules()[1]
 
@@ -82,7 +65,7 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     lin = np.clip(obs - refl[:, None] * obs[keep].mean(0), 0.0, None)
     lin = lin / np.maximum(T, 0.05)[:, None]
     frame = frame_for_scene(K, (W, H), P, radius)
-    z = true_depth(desc)
+    z = depth_map(desc)
     # The true depth on a map over the frame's range, about a cell per pixel.
     (u0, u1), (v0, v1) = frame.u_range, frame.v_range
     ns, nt = int(round(u1 - u0)), int(round(v1 - v0))

@@ -134,6 +134,26 @@ def test_shape_ids_exclude_and_insert_objects():
     assert not (without <= -1000).any()
 
 
+def test_depth_map_is_the_planes_depth_and_inf_past_it():
+    """A slanted panel over the left half of the view: each pixel's depth is where its
+    ray K^-1 (u, v, 1) meets the plane n.X = n.C, z = n.C / n.r; the environment inf."""
+    K = camera.intrinsics(W, H, 60.0)
+    C, n = np.array([-1.0, 0.0, 3.0]), np.array([0.3, 0.0, -1.0])
+    wall = {"id": 0, "name": "wall", "kind": "rectangle",
+            "to_world": presets.panel(C, n, [0, 1, 0], 2.0, 4.0).tolist(),
+            "material": {"type": "diffuse", "rgb": [0.5, 0.5, 0.5]}}
+    desc = {**_light_desc(K, (W, H), []), "objects": [wall]}
+    z = render.depth_map(desc)
+    ids = render.shape_ids(desc)
+    assert z.shape == (H, W) and (ids == 0).sum() > 0.2 * W * H
+    v, u = np.nonzero(ids == 0)
+    r = camera.pixel_rays(K, u, v)
+    r = r / r[:, 2:3]
+    nn = n / np.linalg.norm(n)
+    assert np.allclose(z[v, u], (nn @ C) / (r @ nn), rtol=1e-4)
+    assert np.all(np.isinf(z[ids == render.NOTHING]))
+
+
 def test_bad_descriptions_are_bad_input():
     with pytest.raises(BadInput):
         presets.describe("kitchen", 1)
