@@ -288,6 +288,8 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     pose_step = int(round(settings.pose_start * total_steps))
     history = {"loss": [], "photo": [], "tv": [], "distortion": [], "pose": [],
                "stage": []}
+    if learn_pose:
+        history["centers"] = []      # (n, 3) per step, metres: the pose's path
     step_times, step = [], 0
     density, _ = _initial_grids(settings)
     # The colour starts at the mean observed radiance, the Fresnel loss (~0.9) undone.
@@ -342,6 +344,8 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
                          ("distortion", dist), ("pose", pose_l)):
                 history[k].append(float(x[0]))
             history["stage"].append(frac)
+            if learn_pose:
+                history["centers"].append(np.round(itg.center_numpy(), 6).tolist())
             step_times.append(time.perf_counter() - ts)
             step += 1
             if bar is not None:

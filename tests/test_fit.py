@@ -209,6 +209,15 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     err1 = np.abs(r.centers[1] - truth[1]).sum()
     assert err1 < 0.8 * err0
     assert np.allclose(r.initial, init)
+    # The pose's path: one (n, 3) per step, still until the centres are freed, then
+    # leaving the initial centres for where the fit put them.
+    path = np.asarray(r.history["centers"])
+    assert path.shape == (len(photo), 4, 3)
+    freed = int(round(st.pose_start * len(photo)))
+    assert np.allclose(path[:freed], init, atol=1e-6)
+    assert np.abs(path[-1] - truth).sum(1)[1] < err0
+    if r.timings["pose_accepted"]:
+        assert np.allclose(path[-1], r.centers, atol=1e-6)
     assert r.recon.shape == (120, 160, 3) and r.recon.dtype == np.float32
     assert np.all((r.recon >= 0) & (r.recon <= 1))
     assert r.totem_points.shape[1] == 3 and len(r.totem_points) > 100
