@@ -6,8 +6,11 @@ For each synthetic scene folder, the masks are proposed the way ``totems masks``
 (``scenes.detect_masks.find_totems`` with the camera's K; as many as the key lists,
 or ``--n`` = the true count when the key gives one radius for all), matched to the true
 masks (``totem_masks/``, rendered) by the largest total IoU, and each true totem's IoU
-printed (0 when it was not found). The summary gives the share of totems at IoU >= 0.95
-per preset (the folder name before the first '-') and over all. ``--jpeg Q``: the photo
+printed (0 when it was not found). The summary gives, per preset (the folder name before
+the first '-'), per channel (the name after '+', e.g. ``jpeg75``; else pristine) and over
+all, the share of totems at IoU >= 0.95, and splits the others into found but imprecise
+(IoU >= 0.5: the right totem, its outline off) and not found (below 0.5: no mask on it,
+or one on something else). The photos are only read: nothing is written into them. ``--jpeg Q``: the photo
 through a JPEG of quality Q first (folders already holding a JPEG are read as they are).
 ``--hints``: one click per totem as a person gives it (``totems masks --hint X,Y``): the
 true mask's centroid moved by up to a third of its radius in a random direction.
@@ -28,6 +31,29 @@ from scipy.optimize import linear_sum_assignment
 from scenes import detect_masks, folder
 
 GOOD_IOU = 0.95
+FOUND_IOU = 0.5     # a mask at least this close to a totem is on it, however imprecise
+
+
+def classify(iou) -> dict:
+    """Counts of totems by IoU: ``good`` (>= GOOD_IOU), ``imprecise`` (found,
+    >= FOUND_IOU but below GOOD_IOU), ``missed`` (below FOUND_IOU), ``n``."""
+    v = np.asarray(iou, float)
+    good = int(np.sum(v >= GOOD_IOU))
+    found = int(np.sum(v >= FOUND_IOU))
+    return {"good": good, "imprecise": found - good, "missed": len(v) - found, "n": len(v)}
+
+
+def summary_rows(by_group: dict) -> list[str]:
+    """Markdown rows: group, totems, share at IoU >= GOOD_IOU, found but imprecise,
+    not found, median and worst IoU; the last row over all groups."""
+    groups = [(name, np.asarray(v, float)) for name, v in sorted(by_group.items())]
+    groups.append(("all", np.concatenate([v for _, v in groups])))
+    rows = []
+    for name, v in groups:
+        c = classify(v)
+        rows.append(f"| {name} | {c['n']} | {c['good'] / c['n']:.0%} | {c['imprecise']} | "
+                    f"{c['missed']} | {np.median(v):.3f} | {v.min():.3f} |")
+    return rows
 
 
 def iou_matrix(found: np.ndarray, true: np.ndarray) -> np.ndarray:
@@ -89,24 +115,27 @@ def main(argv=None) -> int:
     p.add_argument("--hints", action="store_true")
     args = p.parse_args(argv)
     rng = np.random.default_rng(0) if args.hints else None
-    by_preset = defaultdict(list)
+    by_preset, by_channel = defaultdict(list), defaultdict(list)
     t0 = time.perf_counter()
+    seconds = []
     for s in args.scenes:
+        t = time.perf_counter()
         iou = scene_iou(s, args.jpeg, rng)
+        seconds.append(time.perf_counter() - t)
         by_preset[s.name.split("-")[0]] += list(iou)
-        print(f"{s.name}: " + " ".join(f"{v:.3f}" for v in iou), flush=True)
-    print(f"\n| preset | totems | IoU >= {GOOD_IOU} | median IoU | worst |")
-    print("|---|---|---|---|---|")
-    every = []
-    for name, v in sorted(by_preset.items()):
-        v = np.array(v)
-        every.append(v)
-        print(f"| {name} | {len(v)} | {np.mean(v >= GOOD_IOU):.0%} | {np.median(v):.3f} | "
-              f"{v.min():.3f} |")
-    v = np.concatenate(every)
-    print(f"| all | {len(v)} | {np.mean(v >= GOOD_IOU):.0%} | {np.median(v):.3f} | "
-          f"{v.min():.3f} |")
-    print(f"{time.perf_counter() - t0:.0f} s for {len(args.scenes)} photos")
+        channel = s.name.split("+")[1] if "+" in s.name else (
+            f"jpeg{args.jpeg}" if args.jpeg else "pristine")
+        by_channel[channel] += list(iou)
+        print(f"{s.name}: " + " ".join(f"{v:.3f}" for v in iou)
+              + f"  ({seconds[-1]:.1f} s)", flush=True)
+    head = (f"| {{}} | totems | IoU >= {GOOD_IOU} | found, imprecise | not found | "
+            f"median IoU | worst |")
+    for what, groups in (("preset", by_preset), ("channel", by_channel)):
+        print("\n" + head.format(what))
+        print("|---|---|---|---|---|---|---|")
+        print("\n".join(summary_rows(groups)))
+    print(f"{time.perf_counter() - t0:.0f} s for {len(args.scenes)} photos "
+          f"(median {np.median(seconds):.1f} s a photo)")
     return 0
 
 

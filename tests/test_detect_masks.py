@@ -172,3 +172,16 @@ def test_a_hint_outside_the_photo_is_bad_input(tmp_path):
     img, _ = _photo(0, n=2)
     with pytest.raises(BadInput, match="outside"):
         write_masks(_folder_with_key(tmp_path, img, 2), hints=[(-5.0, 10.0)])
+
+
+def test_masks_benchmark_tells_an_imprecise_outline_from_a_missed_totem():
+    # benchmarks/masks_iou.py: a mask on the totem with its outline a few pixels off is
+    # "found, imprecise", a mask on something else leaves the totem "not found".
+    from benchmarks.masks_iou import classify, matched_iou
+    v, u = np.mgrid[0:120, 0:160]
+    disc = lambda x, y, r: np.hypot(u - x, v - y) < r
+    true = np.stack([disc(40, 60, 20), disc(110, 60, 20), disc(140, 20, 10)])
+    found = np.stack([disc(40.3, 60, 20), disc(113, 60, 20), disc(40, 100, 12)])
+    iou = matched_iou(found, true)
+    assert iou[0] >= 0.95 and 0.5 <= iou[1] < 0.95 and iou[2] < 0.5, iou
+    assert classify(iou) == {"good": 1, "imprecise": 1, "missed": 1, "n": 3}
