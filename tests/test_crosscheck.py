@@ -92,7 +92,14 @@ def test_read_case_and_crosscheck(nerf, tmp_path):
     assert abs(res2["heatmap"]["pearson"]) < 0.2 and res2["heatmap"]["top_iou"] < 0.5
     assert res2["heatmap"]["only_ours"]
 
-    out = write_crosscheck(res, tmp_path / "cc")
+    import matplotlib
+    backend = matplotlib.get_backend()
+    matplotlib.use("svg")                     # any backend the caller chose (a notebook's)
+    try:
+        out = write_crosscheck(res, tmp_path / "cc")
+        assert matplotlib.get_backend() == "svg"           # is left as it was
+    finally:
+        matplotlib.use(backend)
     import json
     rep = json.loads((out / "report.json").read_text())
     assert rep["totems"][1]["nerf"] == pytest.approx(learned[1].tolist())

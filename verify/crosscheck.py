@@ -228,9 +228,7 @@ def crosscheck(scene, ours, our_heatmap, our_protect, nerf: NerfRun) -> dict:
 def write_crosscheck(result: dict, out_dir) -> Path:
     """Write ``report.json`` and ``crosscheck.png`` (ours | NeRF | |difference| |
     heatmaps) into ``out_dir``, each atomically."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure    # no pyplot: the caller's backend is left alone
 
     out_dir = Path(out_dir)
     images = result.get("_images", {})
@@ -241,7 +239,8 @@ def write_crosscheck(result: dict, out_dir) -> Path:
                                   ("heat_ours", "our L1 heatmap"),
                                   ("heat_nerf", "NeRF L1 heatmap")) if k in images]
     if panels:
-        fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 2.8), dpi=100)
+        fig = Figure(figsize=(3.2 * len(panels), 2.8), dpi=100)
+        axes = fig.subplots(1, len(panels))
         for ax, (k, title) in zip(np.atleast_1d(axes), panels):
             img = images[k]
             if img.ndim == 3:
@@ -253,6 +252,5 @@ def write_crosscheck(result: dict, out_dir) -> Path:
         fig.tight_layout()
         buf = io.BytesIO()
         fig.savefig(buf, format="png")
-        plt.close(fig)
         folder.write_bytes(out_dir / "crosscheck.png", buf.getvalue())
     return out_dir
