@@ -1,20 +1,22 @@
 """How well ``totems masks`` finds the totems: IoU of each proposed mask with the truth.
 
-    python benchmarks/masks_iou.py SCENE... [--jpeg Q] [--hints]
+    python benchmarks/masks_iou.py SCENE... [--jpeg Q] [--hints] [--without-glass]
 
 For each synthetic scene folder, the masks are proposed the way ``totems masks`` does
-(``scenes.detect_masks.find_totems`` with the camera's K; as many as the key lists,
-or ``--n`` = the true count when the key gives one radius for all), matched to the true
-masks (``totem_masks/``, rendered) by the largest total IoU, and each true totem's IoU
-printed (0 when it was not found). The summary gives, per preset (the folder name before
-the first '-'), per channel (the name after '+', e.g. ``jpeg75``; else pristine) and over
-all, the share of totems at IoU >= 0.95, and splits the others into found but imprecise
-(IoU >= 0.5: the right totem, its outline off) and not found (below 0.5: no mask on it,
-or one on something else). The photos are only read: nothing is written into them. ``--jpeg Q``: the photo
-through a JPEG of quality Q first (folders already holding a JPEG are read as they are).
-``--hints``: one click per totem as a person gives it (``totems masks --hint X,Y``): the
-true mask's centroid moved by up to a third of its radius in a random direction.
-Seconds per photo.
+(``scenes.detect_masks.find_totems`` with the camera's K and the key's IoR; as many as
+the key lists, those whose score reaches ``MIN_KEYED``, or ``--n`` = the true count
+when the key gives one radius for all), matched to the true masks (``totem_masks/``,
+rendered) by the largest total IoU, and each true totem's IoU printed (0 when it was
+not found). The summary gives, per preset (the folder name before the first '-'), per
+channel (the name after '+', e.g. ``jpeg75``; else pristine) and over all, the share of
+totems at IoU >= 0.95, and splits the others into found but imprecise (IoU >= 0.5: the
+right totem, its outline off) and not found (below 0.5: no mask on it, or one on
+something else). The photos are only read: nothing is written into their folders.
+``--jpeg Q``: the photo through a JPEG of quality Q first (folders already holding a
+JPEG are read as they are). ``--hints``: one click per totem as a person gives it
+(``totems masks --hint X,Y``): the true mask's centroid moved by up to a third of its
+radius in a random direction. ``--without-glass``: the detector before the glass test
+(no IoR; a key's list gated by the ring score). Seconds per photo.
 """
 
 from __future__ import annotations
@@ -88,9 +90,10 @@ def clicks(masks: np.ndarray, rng) -> np.ndarray:
     return np.array(out)
 
 
-def scene_iou(scene_dir: Path, jpeg: int | None = None, rng=None) -> np.ndarray:
+def scene_iou(scene_dir: Path, jpeg: int | None = None, rng=None, *,
+              glass: bool = True) -> np.ndarray:
     """Each true totem's IoU with the mask ``totems masks`` would propose for it (with
-    ``rng``: given one click per totem)."""
+    ``rng``: given one click per totem; ``glass`` False: without the key's IoR)."""
     scene = folder.read_scene(scene_dir)
     img = np.asarray(scene.image, np.float32)
     if jpeg is not None and scene.jpeg is None:
@@ -100,8 +103,12 @@ def scene_iou(scene_dir: Path, jpeg: int | None = None, rng=None) -> np.ndarray:
     listed = detect_masks.expected_totems(scene_dir)
     told = None if listed is not None else scene.n_totems
     hints = None if rng is None else clicks(np.asarray(scene.masks, bool), rng)
-    found = detect_masks.find_totems(img, n=told, K=np.asarray(scene.K, float), hints=hints)
     want = scene.n_totems if hints is not None else listed or told
+    keyed = hints is None and listed is not None and glass   # only the key's list
+    found = detect_masks.find_totems(                         # says how many
+        img, n=want if glass else told, K=np.asarray(scene.K, float), hints=hints,
+        ior=scene.ior if glass else None,
+        min_score=detect_masks.MIN_KEYED if keyed else None)
     if len(found) > want:
         found = sorted(found, key=lambda t: -t[1])[:want]
     masks = detect_masks.ellipse_masks(found, img.shape[:2])
@@ -113,6 +120,7 @@ def main(argv=None) -> int:
     p.add_argument("scenes", nargs="+", type=Path)
     p.add_argument("--jpeg", type=int, default=None)
     p.add_argument("--hints", action="store_true")
+    p.add_argument("--without-glass", action="store_true")
     args = p.parse_args(argv)
     rng = np.random.default_rng(0) if args.hints else None
     by_preset, by_channel = defaultdict(list), defaultdict(list)
@@ -120,7 +128,7 @@ def main(argv=None) -> int:
     seconds = []
     for s in args.scenes:
         t = time.perf_counter()
-        iou = scene_iou(s, args.jpeg, rng)
+        iou = scene_iou(s, args.jpeg, rng, glass=not args.without_glass)
         seconds.append(time.perf_counter() - t)
         by_preset[s.name.split("-")[0]] += list(iou)
         channel = s.name.split("+")[1] if "+" in s.name else (

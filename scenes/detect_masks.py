@@ -20,6 +20,14 @@ contour's support, times the busyness; a candidate only suppresses a shifted cop
 itself of about its size (a large floor circle around a totem no longer hides it; see
 docs/decisions.md, 'masks: ranking by ring score and contour support').
 
+With K and the key's index of refraction, each fitted outline's score is also scaled by
+what a glass sphere of the key would show there (:func:`glass_factor`,
+:mod:`scenes.glass`): the rest of the photo, inverted; an opaque ball or a ring of
+texture shows something else. When only the key's list says how many totems there are,
+the best that many whose final score reaches :data:`MIN_KEYED` count (without K, those
+whose ring score reaches :data:`MIN_SCORE`; see docs/decisions.md, 'masks: what the key
+predicts through the glass').
+
 Floors of grass, coins and checkers make rings that can outrank a totem whose edge is
 faint against the floor it shows; such a mask must be drawn by hand.
 Masks drawn by hand are always preferred: :func:`write_masks` never
@@ -32,17 +40,19 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes import folder, silhouette
+from scenes import folder, glass, silhouette
 from scenes.errors import BadInput
 
-__all__ = ["find_totems", "ellipse_masks", "radius_range", "expected_totems",
-           "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE", "propose_masks",
-           "draw_check", "write_masks"]
+__all__ = ["find_totems", "ellipse_masks", "radius_range", "expected_totems", "key_iors",
+           "glass_factor", "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE",
+           "GLASS_WEIGHT", "MIN_KEYED", "propose_masks", "draw_check", "write_masks"]
 
 MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (silhouette.support)
 MIN_SCORE = 0.2          # circle score (see _candidates) of a totem when n is not given
 MAX_CANDIDATES = 48
 WORK_SIZE = 240          # candidates are searched on a copy with this shorter side
+GLASS_WEIGHT = 2.0       # a fitted candidate's score times exp(GLASS_WEIGHT * glass score)
+MIN_KEYED = 0.4          # final score of a totem when only the key's list says how many
 
 
 def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.ndarray:
@@ -148,10 +158,15 @@ def radius_range(shape, r_min: float | None = None, r_max: float | None = None):
 
 def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None = None,
                 r_max: float | None = None, K: np.ndarray | None = None,
-                hints=None) -> list:
+                hints=None, ior=None, min_score: float | None = None) -> list:
     """The totems found in a photo, as (cv2 ellipse, score), left to right; at most
     ``n`` (every one that passes the checks when None), or one per hint (see
-    :func:`propose_masks` for the parameters). May find fewer than asked."""
+    :func:`propose_masks` for the parameters). May find fewer than asked.
+
+    ``ior``: the key's indices of refraction (one, or one per totem); with ``K`` each
+    fitted outline's score is scaled by what the key predicts through the glass
+    (:func:`glass_factor`). ``min_score``: only outlines whose final score reaches it
+    count (:data:`MIN_KEYED` when only the key's list says how many there are)."""
     img = np.asarray(image, np.float32)
     if img.ndim != 3 or img.shape[2] < 3:
         raise BadInput("propose_masks needs an (H, W, 3) colour photo")
@@ -159,14 +174,18 @@ def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None 
     r_min, r_max = radius_range(colour.shape, r_min, r_max)
     K = None if K is None else np.asarray(K, float)
     if hints is not None and len(hints):
-        found = [_best_near(colour, h, r_min, r_max, K) for h in np.asarray(hints, float)]
+        found = [_best_near(colour, h, r_min, r_max, K, ior)
+                 for h in np.asarray(hints, float)]
         found = [f for f in found if f is not None]
     else:
         keep = MAX_CANDIDATES if n is None else max(MAX_CANDIDATES, 4 * n)
         cands = _search(colour, r_min, r_max, keep)
         if n is None:
             cands = cands[cands[:, 3] >= MIN_SCORE]
-        found = _apart(_fitted(colour, cands, K))
+        found = _fitted(colour, cands, K, ior)
+        if min_score is not None:
+            found = [f for f in found if f[1] >= min_score]
+        found = _apart(found)
         found = found if n is None else found[:n]
     return sorted(found, key=lambda t: t[0][0][0])
 
@@ -191,9 +210,10 @@ def _search(colour, r_min, r_max, keep) -> np.ndarray:
     return cands
 
 
-def _fitted(colour, cands, K) -> list:
+def _fitted(colour, cands, K, ior=None) -> list:
     """Each candidate fitted to the silhouette and scored, (ellipse, score), best first;
-    candidates whose fitted contour is not an edge all the way round are dropped."""
+    candidates whose fitted contour is not an edge all the way round are dropped. With
+    ``K`` and the key's ``ior``, each score is scaled by :func:`glass_factor`."""
     H, W = colour.shape[:2]
     field = silhouette.orientation_field(colour, 1.0)
     polish = silhouette.gradients(colour, 0.7)
@@ -208,7 +228,24 @@ def _fitted(colour, cands, K) -> list:
         if support >= MIN_SUPPORT_FIT:  # both the coarse ring score and the fitted edge
             score = np.sqrt(max(cand[3], 0.0) * support)
             found.append((ell, score * np.clip(silhouette.busyness(ell, edge), 0.5, 1.3)))
+    if found and K is not None and ior is not None:
+        g = glass_factor(colour, [e for e, _ in found], K, ior)
+        found = [(e, s * f) for (e, s), f in zip(found, g)]
     return sorted(found, key=lambda t: -t[1])
+
+
+def glass_factor(colour, ellipses, K, ior) -> np.ndarray:
+    """(k,) ``exp(GLASS_WEIGHT * g)`` for each fitted outline (cv2 ellipses), ``g``
+    :func:`scenes.glass.glass_scores` of its circle: how well the colours inside
+    correlate with the photo where the key's sphere would send those pixels' rays. A
+    glass sphere of the key shows the rest of the photo, inverted; an opaque ball or a
+    ring of texture does not (the correlation is near 0 or below)."""
+    import cv2
+
+    inside = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_INSIDE_PX)
+    around = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_PX)
+    circles = np.array([(e[0][0], e[0][1], 0.25 * (e[1][0] + e[1][1])) for e in ellipses])
+    return np.exp(GLASS_WEIGHT * glass.glass_scores(inside, around, circles, K, ior))
 
 
 def _apart(found) -> list:
@@ -222,7 +259,7 @@ def _apart(found) -> list:
     return chosen
 
 
-def _best_near(colour, hint, r_min, r_max, K):
+def _best_near(colour, hint, r_min, r_max, K, ior=None):
     """The best totem whose fitted outline holds the pixel ``hint`` (x, y), searched in
     a window around it, or None."""
     H, W = colour.shape[:2]
@@ -236,7 +273,7 @@ def _best_near(colour, hint, r_min, r_max, K):
     cands[:, 0] += x0
     cands[:, 1] += y0
     holds = np.hypot(cands[:, 0] - x, cands[:, 1] - y) < cands[:, 2]
-    fitted = [f for f in _fitted(colour, cands[holds], K)
+    fitted = [f for f in _fitted(colour, cands[holds], K, ior)
               if np.hypot(f[0][0][0] - x, f[0][0][1] - y) < 0.5 * max(f[0][1])]
     return fitted[0] if fitted else None
 
@@ -276,14 +313,30 @@ def _scene_K(scene_dir) -> np.ndarray | None:
 def expected_totems(scene_dir) -> int | None:
     """How many totems the scene's key lists (``totems.json`` as a list), or None when
     it gives one radius and IoR for all (or there is no key)."""
+    data = _key_entries(scene_dir)
+    return len(data) if isinstance(data, list) else None
+
+
+def key_iors(scene_dir) -> list | None:
+    """The indices of refraction the scene's key gives (one, or one per totem), or None
+    when there is no readable key."""
+    data = _key_entries(scene_dir)
+    entries = data if isinstance(data, list) else [data]
+    try:
+        iors = [float(e["ior"]) for e in entries]
+    except (TypeError, KeyError, ValueError):
+        return None
+    return iors if iors and all(1.0 < v < 4.0 for v in iors) else None
+
+
+def _key_entries(scene_dir):
+    """``totems.json`` as parsed JSON, or None when it is missing or not JSON."""
     import json
 
-    path = Path(scene_dir) / "totems.json"
     try:
-        data = json.loads(path.read_text())
+        return json.loads((Path(scene_dir) / "totems.json").read_text())
     except (OSError, ValueError, UnicodeDecodeError):
         return None
-    return len(data) if isinstance(data, list) else None
 
 
 def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = None,
@@ -316,12 +369,15 @@ def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = N
         masks, files, proposed = masks[order], [existing[i] for i in order], False
     elif masks is None:
         # --n or the hints say how many there are; the key's list only how many are
-        # wanted: then only candidates that pass MIN_SCORE count, the best of them
+        # wanted: then, with K and the key's IoR, the best that many whose final score
+        # reaches MIN_KEYED count, else those whose ring score passes MIN_SCORE
         told = n or (len(hints) if hints is not None and len(hints) else None)
         want = told or expected_totems(scene_dir)
+        K, ior = _scene_K(scene_dir), key_iors(scene_dir)
+        keyed = bool(want and not told and K is not None and ior is not None)
         r_lo, r_hi = radius_range(image.shape, *(radii or (None, None)))
-        found = find_totems(image, n=told, r_min=r_lo, r_max=r_hi, K=_scene_K(scene_dir),
-                            hints=hints)
+        found = find_totems(image, n=want if keyed else told, r_min=r_lo, r_max=r_hi, K=K,
+                            hints=hints, ior=ior, min_score=MIN_KEYED if keyed else None)
         if want is not None and len(found) > want:
             found = sorted(sorted(found, key=lambda t: -t[1])[:want],
                            key=lambda t: t[0][0][0])

@@ -185,3 +185,90 @@ def test_masks_benchmark_tells_an_imprecise_outline_from_a_missed_totem():
     iou = matched_iou(found, true)
     assert iou[0] >= 0.95 and 0.5 <= iou[1] < 0.95 and iou[2] < 0.5, iou
     assert classify(iou) == {"good": 1, "imprecise": 1, "missed": 1, "n": 3}
+
+
+def test_refraction_through_the_sphere_matches_inverse_sphere():
+    # scenes/glass.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell and
+    # Fresnel code): the same exit points and directions for rays across the sphere.
+    from inverse import sphere
+    from scenes import backend, camera, glass
+    backend.use()
+    mi = backend.modules()[1]
+    K = camera.intrinsics(640, 480, 60)
+    P, R, eta = np.array([0.3, -0.1, 1.5]), 0.1, 1.52
+    uv = camera.project(K, P[None])[0]
+    s = K[0, 0] * np.tan(np.arcsin(R / np.linalg.norm(P)))
+    rng = np.random.default_rng(0)
+    a, rho = rng.uniform(0, 2 * np.pi, 300), 0.9 * s * np.sqrt(rng.uniform(0, 1, 300))
+    d = camera.pixel_rays(K, uv[0] + rho * np.cos(a), uv[1] + rho * np.sin(a))
+    E, d_out, valid = glass.refract_sphere(d, P, R, eta)
+    E2, d2, _, valid2 = sphere.totem_rays(mi.Point3f(0, 0, 0),
+                                          mi.Vector3f(*d.T.astype(np.float32)), P, R, eta)
+    ok = np.asarray(valid2, bool)
+    assert valid.all() and ok.sum() > 250
+    assert np.allclose(E[ok], np.array(E2).reshape(3, -1).T[ok], atol=1e-6)
+    assert np.allclose(d_out[ok], np.array(d2).reshape(3, -1).T[ok], atol=1e-5)
+    # and the sphere the circle implies is the one it was drawn from
+    assert np.allclose(glass.sphere_from_circle(uv[0], uv[1], s, K, R), P, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def glass_and_ball():
+    """A rendered envmap scene (320x240, 16 spp) whose fourth sphere is an opaque
+    textured ball: photo, K, the three glass spheres' and the ball's circles (the image
+    of each tangent cone, (u0, v0, s) pixels)."""
+    from scenes import camera, presets, render
+    desc = presets.describe("envmap", seed=4, size=(320, 240))
+    ball = desc["totems"].pop()
+    T = np.eye(4)
+    T[:3, :3] *= ball["radius"]
+    T[:3, 3] = ball["center"]
+    desc["objects"].append({"id": 999, "name": "ball", "kind": "sphere",
+                            "to_world": T.tolist(), "removable": False,
+                            "material": {"type": "diffuse", "texture": "brick",
+                                         "tint": [0.8, 0.5, 0.4], "uv_scale": [2.0, 2.0]}})
+    img = np.asarray(render.render(desc, spp=16), np.float32)
+    K = np.asarray(desc["K"], float)
+
+    def circle(P, R):
+        uv = camera.project(K, np.asarray(P, float)[None])[0]
+        return uv[0], uv[1], K[0, 0] * np.tan(np.arcsin(R / np.linalg.norm(P)))
+
+    circles = np.array([circle(t["center"], t["radius"]) for t in desc["totems"] + [ball]])
+    return img, K, circles
+
+
+@pytest.mark.slow
+def test_the_key_tells_glass_from_an_opaque_ball(glass_and_ball):
+    # What the key predicts through the glass is found inside the three glass spheres,
+    # not inside the ball, and the detector given the key's IoR takes the glass ones.
+    import cv2
+    from scenes import glass
+    from scenes.detect_masks import find_totems
+    img, K, circles = glass_and_ball
+    g = glass.glass_scores(cv2.GaussianBlur(img, (0, 0), glass.SIGMA_INSIDE_PX),
+                           cv2.GaussianBlur(img, (0, 0), glass.SIGMA_PX), circles, K, [1.52])
+    assert np.all(g[:3] > g[3] + 0.2), g
+    found = find_totems(img, n=3, K=K, ior=[1.52])
+    centres = np.array([e[0] for e, _ in found])
+    assert len(found) == 3
+    assert np.all(np.hypot(*(centres - circles[:3, :2]).T) < 2.0), (centres, circles)
+
+
+@pytest.mark.slow
+def test_a_key_listing_the_ball_too_is_told_fewer_were_found(glass_and_ball, tmp_path):
+    # With calib.npy and a key that lists its totems, the three glass spheres pass the
+    # final score and are written; a key listing four gets exit 3's "found 3 of 4": the
+    # ball does not pass for the fourth.
+    img, K, circles = glass_and_ball
+    scenes = {}
+    for n_key in (3, 4):
+        scenes[n_key] = _folder_with_key(tmp_path / f"k{n_key}", img, n_key)
+        folder.write_calib(scenes[n_key] / "calib.npy", K)
+    four = write_masks(scenes[4])
+    assert not four["complete"] and four["found"] == 3, four
+    three = write_masks(scenes[3])
+    assert three["complete"] and three["n"] == 3, three
+    masks = np.stack([folder.read_mask(p) for p in three["masks"]])
+    for m, (x, y, s) in zip(masks, circles[:3]):      # left to right, each on its sphere
+        assert m[int(round(y)), int(round(x))] and m.sum() > 0.8 * np.pi * s * s
