@@ -116,7 +116,7 @@ def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.nd
 
 def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | None = None,
                   r_max: float | None = None, K: np.ndarray | None = None,
-                  hints=None) -> np.ndarray:
+                  hints=None, ior=None) -> np.ndarray:
     """Propose totem masks for a photo.
 
     Parameters
@@ -131,6 +131,8 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
         than a free ellipse (5).
     hints : (k, 2) pixel points (x, y), one inside each totem: the search is made
         around each (one totem a hint) instead of over the whole photo.
+    ior : the key's indices of refraction; with ``K``, candidates are also ranked by
+        what a glass sphere of the key would show inside them (:func:`glass_factor`).
 
     Returns
     -------
@@ -138,7 +140,7 @@ def propose_masks(image: np.ndarray, *, n: int | None = None, r_min: float | Non
 
     Raises BadInput when no totem (or fewer than ``n``) is found.
     """
-    found = find_totems(image, n=n, r_min=r_min, r_max=r_max, K=K, hints=hints)
+    found = find_totems(image, n=n, r_min=r_min, r_max=r_max, K=K, hints=hints, ior=ior)
     if not found:
         raise BadInput("no totem found in the photo; draw its masks by hand "
                        "(totem_masks/totem_000.png, white = totem)")
