@@ -101,6 +101,8 @@ def report(rows: list[dict], cal: calibration.Calibration) -> str:
              f"largest untouched {t.max():.3f} (p = {cal.p_value(t.max()):.3g})", ""]
     for key in ("preset", "channel"):
         groups = [r[key] for r in rows]
+        if len(set(groups)) < 2:          # nothing to hold out
+            continue
         held = calibration.leave_one_group_out(t, groups, alpha=cal.alpha)
         lines += [f"| {key} | photos | median | largest | false alarms, {key} held out |",
                   "|---|---|---|---|---|"]

@@ -56,17 +56,20 @@ def _rate(flags) -> str:
     return f"{k} of {n} ({100 * k / n:.0f} %, {100 * lo:.0f}-{100 * hi:.0f} %)"
 
 
+def auc(neg, pos) -> float:
+    """ROC AUC of ``pos`` above ``neg``: the chance a manipulated photo outscores an
+    untouched one, ties counted half (Mann-Whitney)."""
+    neg, pos = np.asarray(neg, float), np.asarray(pos, float)
+    return float(((pos[:, None] > neg[None]) + 0.5 * (pos[:, None] == neg[None])).mean())
+
+
 def auc_interval(neg, pos, *, n_boot: int = 2000, seed: int = 0):
     """ROC AUC of ``pos`` above ``neg`` and its 95 % bootstrap interval."""
-    from sklearn.metrics import roc_auc_score
-
     neg, pos = np.asarray(neg, float), np.asarray(pos, float)
-    y = np.r_[np.zeros(neg.size), np.ones(pos.size)]
-    auc = float(roc_auc_score(y, np.r_[neg, pos]))
     rng = np.random.default_rng(seed)
-    boots = [roc_auc_score(y, np.r_[rng.choice(neg, neg.size), rng.choice(pos, pos.size)])
+    boots = [auc(rng.choice(neg, neg.size), rng.choice(pos, pos.size))
              for _ in range(n_boot)]
-    return auc, tuple(float(q) for q in np.percentile(boots, [2.5, 97.5]))
+    return auc(neg, pos), tuple(float(q) for q in np.percentile(boots, [2.5, 97.5]))
 
 
 def tables(rows: list[dict], cal) -> str:

@@ -120,6 +120,14 @@ def test_the_calibration_refuses_the_benchmarks_seeds(tmp_path, capsys):
     assert err.count("\n") == 0 and "box seed 3 belongs to benchmark" in err
 
 
+def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys):
+    rows = [(f"{p}-{s}", p, s, 0.01 * s * (1 + k))
+            for k, p in enumerate(("box", "envmap", "window")) for s in range(11, 19)]
+    assert calibrate_verdict.main([str(_bench(tmp_path, rows))]) == 0
+    printed = capsys.readouterr().out
+    assert "| window | 8 |" in printed and "| pristine |" not in printed
+
+
 def test_the_shipped_calibration_reads():
     cal = calibration.load()
     assert cal.n >= 60 and cal.source["set"] == "calibration"

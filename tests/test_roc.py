@@ -1,0 +1,33 @@
+"""benchmarks/roc.py: the image-level AUC and its interval."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "roc.py"
+_spec = importlib.util.spec_from_file_location("roc", _PATH)
+roc = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(roc)
+
+
+def test_auc_by_ranks_matches_the_area_under_the_curve():
+    from sklearn.metrics import roc_auc_score
+
+    rng = np.random.default_rng(0)
+    neg = np.round(rng.normal(0.0, 1.0, 40), 1)        # rounded: ties across classes
+    pos = np.round(rng.normal(0.8, 1.0, 25), 1)
+    y = np.r_[np.zeros(neg.size), np.ones(pos.size)]
+    assert roc.auc(neg, pos) == pytest.approx(roc_auc_score(y, np.r_[neg, pos]))
+    assert roc.auc([0.0, 1.0], [2.0, 3.0]) == 1.0 and roc.auc([1.0], [1.0]) == 0.5
+
+
+def test_auc_interval_holds_the_estimate_and_narrows_with_more_photos():
+    rng = np.random.default_rng(1)
+    small = roc.auc_interval(rng.normal(0, 1, 20), rng.normal(1, 1, 20), n_boot=500)
+    large = roc.auc_interval(rng.normal(0, 1, 400), rng.normal(1, 1, 400), n_boot=500)
+    for a, (lo, hi) in (small, large):
+        assert lo <= a <= hi
+    assert large[1][1] - large[1][0] < small[1][1] - small[1][0]
+    assert 0.70 < large[0] < 0.80          # Phi(1 / sqrt 2) = 0.760
