@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from inverse import view
-from inverse.fit_files import FitResult, scene_fingerprint
+from inverse.fit_files import FitResult, fit_timings, scene_fingerprint
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from inverse.losses import TotalVariation, outline_term
 from inverse.rays import TotemPixels, TotemRays, exit_rays, refracted_rays, totem_pixels
@@ -178,9 +178,9 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         recon, depth, totem_points = chosen.recon, chosen.depth, chosen.points
     t_stereo = time.perf_counter() - t0
 
-    timings = _timings(model.step_times, settings, t_pose=t_pose, t_render=t_render,
-                       t_stereo=t_stereo, t_total=time.perf_counter() - t_start,
-                       n_rays=len(pixels.u), pose_accepted=pose_accepted)
+    timings = fit_timings(model.step_times, settings, t_pose=t_pose, t_render=t_render,
+                          t_stereo=t_stereo, t_total=time.perf_counter() - t_start,
+                          n_rays=len(pixels.u), pose_accepted=pose_accepted)
     grid = {"density": model.density, "colour": model.colour, **frame.to_dict(),
             "n_samples": np.int64(settings.n_samples)}
     return FitResult(centers=centers, initial=initial, recon=recon, recon_depth=depth,
@@ -426,29 +426,3 @@ def _camera_view(rays: TotemRays, frame, density, grid_view, grid_points, size,
                                    "p2": settings.stereo_p2},
                             margin=settings.stereo_margin)
 
-
-def _timings(step_times, settings: FitSettings, **figures) -> dict:
-    """fit.json's ``timings``: the stages' seconds, the steps' first, steady and total
-    time, and an estimate of the kernel compile time (each stage's first step compiles
-    new kernels)."""
-    steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
-    timings = {
-        "pose_init_s": figures["t_pose"],
-        "first_step_s": step_times[0] if step_times else None,
-        "steady_step_s": steady,
-        "optimise_s": float(np.sum(step_times)),
-        "render_s": figures["t_render"],
-        "stereo_s": figures["t_stereo"],
-        "total_s": figures["t_total"],
-        "n_rays": int(figures["n_rays"]),
-        "pose_accepted": figures["pose_accepted"],
-        "n_samples": int(settings.n_samples),
-    }
-    firsts, i = [], 0
-    for _, s in settings.stages:
-        if s:
-            firsts.append(step_times[i])
-        i += int(s)
-    if steady is not None:
-        timings["compile_s_estimate"] = float(sum(max(0.0, f - steady) for f in firsts))
-    return timings

@@ -22,7 +22,8 @@ from scenes import backend, folder
 from scenes.edits2d import bbox
 from scenes.errors import BadInput
 
-__all__ = ["FitResult", "FIT_FILES", "scene_fingerprint", "write_fit", "load_fit"]
+__all__ = ["FitResult", "FIT_FILES", "scene_fingerprint", "fit_timings", "write_fit",
+           "load_fit"]
 
 FIT_FILES = ("totem_pose.npy", "initial_totem_pose.npy", "grid.npz", "recon.png",
              "totem_views.png", "fit.json", "totem_points.npy", "totem_rays.npz")
@@ -75,6 +76,34 @@ def scene_fingerprint(scene: folder.Scene) -> str:
     if scene.initial_pose is not None:      # a given initial pose replaces the masks' one
         h.update(np.round(np.asarray(scene.initial_pose, np.float64), 6).tobytes())
     return h.hexdigest()[:16]
+
+
+def fit_timings(step_times, settings, **figures) -> dict:
+    """fit.json's ``timings``: the stages' seconds, the steps' first, steady and total
+    time, and an estimate of the kernel compile time (each stage's first step compiles
+    new kernels). ``settings`` is the fit's :class:`inverse.fit.FitSettings`
+    (its ``stages`` and ``n_samples``); ``figures`` the stages' seconds and counts."""
+    steady = float(np.median(step_times[1:])) if len(step_times) > 1 else None
+    timings = {
+        "pose_init_s": figures["t_pose"],
+        "first_step_s": step_times[0] if step_times else None,
+        "steady_step_s": steady,
+        "optimise_s": float(np.sum(step_times)),
+        "render_s": figures["t_render"],
+        "stereo_s": figures["t_stereo"],
+        "total_s": figures["t_total"],
+        "n_rays": int(figures["n_rays"]),
+        "pose_accepted": figures["pose_accepted"],
+        "n_samples": int(settings.n_samples),
+    }
+    firsts, i = [], 0
+    for _, s in settings.stages:
+        if s:
+            firsts.append(step_times[i])
+        i += int(s)
+    if steady is not None:
+        timings["compile_s_estimate"] = float(sum(max(0.0, f - steady) for f in firsts))
+    return timings
 
 
 def _totem_views(scene_image, totem_pred, masks) -> np.ndarray:

@@ -345,11 +345,7 @@ def shape_ids(desc: dict, *, totems: bool = True, exclude_ids=()) -> np.ndarray:
     W, H = _check(desc)
     d, ids = scene_dict(desc, spp=1, totems=totems, exclude_ids=exclude_ids)
     scene = mi.load_dict(d)
-    sensor = scene.sensors()[0]
-    idx = dr.arange(mi.UInt32, W * H)
-    pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
-    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(ray)
+    _, si = _centre_hits(scene, W, H)
     hit = np.array(dr.reinterpret_array(mi.UInt32, si.shape)).astype(np.int64)
     valid = np.array(si.is_valid())
     lookup = {}
@@ -370,16 +366,22 @@ def depth_map(desc: dict, *, totems: bool = False) -> np.ndarray:
     The rays are :func:`shape_ids`'; without ``totems`` (the default) the depth of the
     scene behind them, as ``truth/clean.png`` shows it.
     """
-    dr, mi = backend.modules()
+    mi = backend.modules()[1]
     W, H = _check(desc)
-    scene = mi.load_dict(scene_dict(desc, spp=1, totems=totems)[0])
-    idx = dr.arange(mi.UInt32, W * H)
-    pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
-    ray, _ = scene.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(ray)
+    ray, si = _centre_hits(mi.load_dict(scene_dict(desc, spp=1, totems=totems)[0]), W, H)
     z = np.array(ray.o.z + si.t * ray.d.z, np.float64)     # rays start on the near plane
     z[~np.array(si.is_valid())] = np.inf
     return z.reshape(H, W)
+
+
+def _centre_hits(scene, W: int, H: int):
+    """The sensor's rays through the W x H pixel centres (film positions (u + 0.5) / W,
+    (v + 0.5) / H) and their first intersections: (ray, si), Dr.Jit arrays."""
+    dr, mi = backend.modules()
+    idx = dr.arange(mi.UInt32, W * H)
+    pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
+    ray, _ = scene.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    return ray, scene.ray_intersect(ray)
 
 
 def totem_masks(desc: dict) -> np.ndarray:
