@@ -368,7 +368,8 @@ def depth_map(desc: dict, *, totems: bool = False) -> np.ndarray:
     """
     mi = backend.modules()[1]
     W, H = _check(desc)
-    ray, si = _centre_hits(mi.load_dict(scene_dict(desc, spp=1, totems=totems)[0]), W, H)
+    scene = mi.load_dict(scene_dict(desc, spp=1, totems=totems)[0])  # alive while si is read
+    ray, si = _centre_hits(scene, W, H)
     z = np.array(ray.o.z + si.t * ray.d.z, np.float64)     # rays start on the near plane
     z[~np.array(si.is_valid())] = np.inf
     return z.reshape(H, W)
@@ -376,7 +377,8 @@ def depth_map(desc: dict, *, totems: bool = False) -> np.ndarray:
 
 def _centre_hits(scene, W: int, H: int):
     """The sensor's rays through the W x H pixel centres (film positions (u + 0.5) / W,
-    (v + 0.5) / H) and their first intersections: (ray, si), Dr.Jit arrays."""
+    (v + 0.5) / H) and their first intersections: (ray, si), Dr.Jit arrays, to be
+    read while ``scene`` is alive (they point into it)."""
     dr, mi = backend.modules()
     idx = dr.arange(mi.UInt32, W * H)
     pos = mi.Point2f((mi.Float(idx % W) + 0.5) / W, (mi.Float(idx // W) + 0.5) / H)
