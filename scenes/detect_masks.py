@@ -23,10 +23,14 @@ docs/decisions.md, 'masks: ranking by ring score and contour support').
 With K and the key's index of refraction, each fitted outline's score is also scaled by
 what a glass sphere of the key would show there (:func:`glass_factor`,
 :mod:`scenes.glass`): the rest of the photo, inverted; an opaque ball or a ring of
-texture shows something else. When only the key's list says how many totems there are,
-the best that many whose final score reaches :data:`MIN_KEYED` count (without K, those
-whose ring score reaches :data:`MIN_SCORE`; see docs/decisions.md, 'masks: what the key
-predicts through the glass').
+texture shows something else. Then the best :data:`REFIT` fits are re-fitted over a wide
+basin around them (:mod:`scenes.cone_fit`; a cone fit settles on the nearest contour, often
+the inner edge of the rim's dark band) and ranked by their outline's alignment times
+:func:`glass_factor` (:func:`_fitted_keyed`). When only the key's list says how many
+totems there are, the best that many whose final score reaches :data:`MIN_KEYED` and
+glass score :data:`MIN_GLASS` count (without K, those whose ring score reaches
+:data:`MIN_SCORE`; see docs/decisions.md, 'masks: what the key predicts through the
+glass' and 'masks: a wide fit around each candidate').
 
 Floors of grass, coins and checkers make rings that can outrank a totem whose edge is
 faint against the floor it shows; such a mask must be drawn by hand.
@@ -40,19 +44,23 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes import folder, glass, silhouette
+from scenes import cone_fit, folder, glass, silhouette
 from scenes.errors import BadInput
 
 __all__ = ["find_totems", "ellipse_masks", "radius_range", "expected_totems", "key_iors",
            "glass_factor", "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE",
-           "GLASS_WEIGHT", "MIN_KEYED", "propose_masks", "draw_check", "write_masks"]
+           "GLASS_WEIGHT", "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS",
+           "propose_masks", "draw_check", "write_masks"]
 
 MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (silhouette.support)
 MIN_SCORE = 0.2          # circle score (see _candidates) of a totem when n is not given
 MAX_CANDIDATES = 48
 WORK_SIZE = 240          # candidates are searched on a copy with this shorter side
-GLASS_WEIGHT = 2.0       # a fitted candidate's score times exp(GLASS_WEIGHT * glass score)
-MIN_KEYED = 0.4          # final score of a totem when only the key's list says how many
+GLASS_WEIGHT = 2.0       # a fitted outline's alignment times exp(GLASS_WEIGHT * glass score)
+GLASS_RANK = 4.0         # first ranking of the fits: arc support times exp(GLASS_RANK * g)
+REFIT = 24               # the best this many first fits are re-fitted over a wide basin
+MIN_KEYED = 0.7          # final score of a totem when only the key's list says how many,
+MIN_GLASS = 0.05         # and its glass score (glass.glass_scores)
 
 
 def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.ndarray:
@@ -168,7 +176,9 @@ def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None 
     ``ior``: the key's indices of refraction (one, or one per totem); with ``K`` each
     fitted outline's score is scaled by what the key predicts through the glass
     (:func:`glass_factor`). ``min_score``: only outlines whose final score reaches it
-    count (:data:`MIN_KEYED` when only the key's list says how many there are)."""
+    count (:data:`MIN_KEYED` when only the key's list says how many there are), and
+    with ``K`` and ``ior`` only those whose glass score reaches :data:`MIN_GLASS` (the
+    glass shows something of the photo)."""
     img = np.asarray(image, np.float32)
     if img.ndim != 3 or img.shape[2] < 3:
         raise BadInput("propose_masks needs an (H, W, 3) colour photo")
@@ -187,6 +197,9 @@ def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None 
         found = _fitted(colour, cands, K, ior)
         if min_score is not None:
             found = [f for f in found if f[1] >= min_score]
+            if found and K is not None and ior is not None:   # and shows the photo
+                g = _glass(colour, [e for e, _ in found], K, ior)
+                found = [f for f, gi in zip(found, g) if gi >= MIN_GLASS]
         found = _apart(found)
         found = found if n is None else found[:n]
     return sorted(found, key=lambda t: t[0][0][0])
@@ -215,7 +228,9 @@ def _search(colour, r_min, r_max, keep) -> np.ndarray:
 def _fitted(colour, cands, K, ior=None) -> list:
     """Each candidate fitted to the silhouette and scored, (ellipse, score), best first;
     candidates whose fitted contour is not an edge all the way round are dropped. With
-    ``K`` and the key's ``ior``, each score is scaled by :func:`glass_factor`."""
+    ``K`` and the key's ``ior``, :func:`_fitted_keyed` instead."""
+    if K is not None and ior is not None:
+        return _fitted_keyed(colour, cands, K, ior)
     H, W = colour.shape[:2]
     field = silhouette.orientation_field(colour, 1.0)
     polish = silhouette.gradients(colour, 0.7)
@@ -230,10 +245,53 @@ def _fitted(colour, cands, K, ior=None) -> list:
         if support >= MIN_SUPPORT_FIT:  # both the coarse ring score and the fitted edge
             score = np.sqrt(max(cand[3], 0.0) * support)
             found.append((ell, score * np.clip(silhouette.busyness(ell, edge), 0.5, 1.3)))
-    if found and K is not None and ior is not None:
-        g = glass_factor(colour, [e for e, _ in found], K, ior)
-        found = [(e, s * f) for (e, s), f in zip(found, g)]
     return sorted(found, key=lambda t: -t[1])
+
+
+def _fitted_keyed(colour, cands, K, ior) -> list:
+    """With the camera's ``K`` and the key's ``ior``: each candidate's tangent cone
+    fitted (:func:`silhouette.fit_cone`) and ranked by the alignment of all but its
+    worst arc (:func:`silhouette.arc_support`) times the busyness times
+    ``exp(GLASS_RANK * g)`` (``g`` :func:`glass.glass_scores`); the best :data:`REFIT`
+    re-fitted over a wide basin (:func:`cone_fit.refit_cone`, kept when better aligned)
+    and scored by their alignment (:func:`silhouette.alignment`) times
+    :func:`glass_factor`. (ellipse, score), best first. See docs/decisions.md, 'masks:
+    a wide fit around each candidate'."""
+    H, W = colour.shape[:2]
+    field = silhouette.orientation_field(colour, 1.0)
+    polish = silhouette.gradients(colour, 0.7)
+    edge = np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
+    first = []
+    for cand in cands:
+        ell = silhouette.fit_cone(field, cand, K, (H, W), polish)
+        if ell is not None:
+            first.append((ell, max(silhouette.arc_support(ell, field), 0.0)
+                          * np.clip(silhouette.busyness(ell, edge), 0.5, 1.3)))
+    if not first:
+        return []
+    g = _glass(colour, [e for e, _ in first], K, ior)
+    first = sorted(((e, s * np.exp(GLASS_RANK * gi)) for (e, s), gi in zip(first, g)),
+                   key=lambda t: -t[1])[:REFIT]
+    final = []
+    for ell, _ in first:
+        (cx, cy), (A, B), _ = ell
+        res = cone_fit.refit_cone(field, (cx, cy, 0.25 * (A + B)), K, (H, W), polish)
+        al = silhouette.alignment(ell, field)
+        if res is not None and silhouette.alignment(res[0], field) > al:
+            ell, al = res[0], silhouette.alignment(res[0], field)
+        final.append((ell, max(al, 0.0)))
+    g = glass_factor(colour, [e for e, _ in final], K, ior)
+    return sorted(((e, s * f) for (e, s), f in zip(final, g)), key=lambda t: -t[1])
+
+
+def _glass(colour, ellipses, K, ior) -> np.ndarray:
+    """(k,) :func:`scenes.glass.glass_scores` of each outline's circle (cv2 ellipses)."""
+    import cv2
+
+    inside = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_INSIDE_PX)
+    around = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_PX)
+    circles = np.array([(e[0][0], e[0][1], 0.25 * (e[1][0] + e[1][1])) for e in ellipses])
+    return glass.glass_scores(inside, around, circles, K, ior)
 
 
 def glass_factor(colour, ellipses, K, ior) -> np.ndarray:
@@ -242,12 +300,7 @@ def glass_factor(colour, ellipses, K, ior) -> np.ndarray:
     correlate with the photo where the key's sphere would send those pixels' rays. A
     glass sphere of the key shows the rest of the photo, inverted; an opaque ball or a
     ring of texture does not (the correlation is near 0 or below)."""
-    import cv2
-
-    inside = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_INSIDE_PX)
-    around = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_PX)
-    circles = np.array([(e[0][0], e[0][1], 0.25 * (e[1][0] + e[1][1])) for e in ellipses])
-    return np.exp(GLASS_WEIGHT * glass.glass_scores(inside, around, circles, K, ior))
+    return np.exp(GLASS_WEIGHT * _glass(colour, ellipses, K, ior))
 
 
 def _apart(found) -> list:

@@ -15,7 +15,7 @@ import numpy as np
 __all__ = ["orientation_field", "gradients", "ellipse_points", "remap", "edge_at",
            "orientation_at", "edge_along", "orientation_along", "cone_points",
            "ellipse_mask", "MIN_AXIS_RATIO", "GRID_SHIFTS", "GRID_SIZES", "fit_cone",
-           "fit_ellipse", "sphere_like", "support", "busyness"]
+           "fit_ellipse", "sphere_like", "support", "busyness", "alignment", "arc_support"]
 
 MIN_AXIS_RATIO = 0.75    # a sphere seen by a normal lens: minor/major axis of its image
 GRID_SHIFTS = (-0.1, 0.0, 0.1)              # cone starts: centre shifts, in radii,
@@ -253,3 +253,26 @@ def busyness(ell, edge: np.ndarray) -> float:
     if inner.size == 0 or outer.size == 0:
         return 1.0
     return float(inner.mean() / (outer.mean() + 1e-6))
+
+
+def alignment(ell, field, n: int = 180) -> float:
+    """Mean of cos(2 phi) along the ellipse ell (cv2 form), phi the angle between the
+    image gradient and the ellipse's normal (``field`` from :func:`orientation_field`):
+    near 1 for an outline that is an edge all the way round, near 0 on texture."""
+    (cx, cy), (A, B), ang = ell
+    return float(orientation_along((cx, cy, A / 2.0, B / 2.0, np.radians(ang)), *field,
+                                   n).mean())
+
+
+def arc_support(ell, field, *, parts: int = 8, missing: int = 1) -> float:
+    """:func:`support` that lets ``missing`` of ``parts`` arcs go: the alignment along
+    each arc of the ellipse ell (cv2 form) less that on copies 0.78 and 1.25 times as
+    large, the (``missing`` + 1)-th worst arc. A totem's rim can vanish over an arc
+    where the glass shows the same floor as beside it, or where it touches the floor."""
+    (cx, cy), (A, B), ang = ell
+    a, b, t = A / 2.0, B / 2.0, np.radians(ang)
+    n = 20 * parts
+    on = orientation_along((cx, cy, a, b, t), *field, n).reshape(parts, -1).mean(1)
+    near = np.stack([orientation_along((cx, cy, a * f, b * f, t), *field, n)
+                     .reshape(parts, -1).mean(1) for f in (0.78, 1.25)]).max(0)
+    return float(np.sort(on - np.maximum(near, 0))[missing])
