@@ -7,9 +7,10 @@ From a bench's runs (``bench.json``: each photo's ``statistic``, kind, preset an
 name, the channel after a ``+``), judged by a calibration (``--calibration``, default
 the shipped one: p-value below its alpha), prints:
 
-- untouched photos called inconsistent, per channel and per preset, with the exact
-  binomial 95 % interval of the rate;
-- per kind and channel, manipulated photos caught (p-value below alpha), with interval;
+- untouched photos over the verdict's own line (1) and over the calibration's line
+  (p-value below its alpha), per channel and per preset, with the exact binomial 95 %
+  interval of the rate;
+- per kind and channel, manipulated photos caught at each line, with interval;
 - per kind, the image-level ROC AUC of the statistic, manipulated photos against every
   untouched one, with a 95 % bootstrap interval (2000 resamples of each class);
 - per kind and channel, the mean patch AP of each judging metric.
@@ -30,6 +31,8 @@ import numpy as np
 from verify.calibration import clopper_pearson, load, statistic_of
 
 JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
+VERDICT_LINE = 1.0
+"""The statistic over which the verdict says inconsistent (``verify.verdict``)."""
 
 
 def load_runs(bench_dirs) -> list[dict]:
@@ -77,18 +80,24 @@ def tables(rows: list[dict], cal) -> str:
     untouched = [r for r in rows if r["kind"] == "none"]
     edited = [r for r in rows if r["kind"] != "none"]
     alpha, line = cal.alpha, cal.line()
-    out = [f"line: statistic {line:.3f} (p = {alpha}; calibration of {cal.n} photos)", ""]
+    out = [f"calibrated line: statistic {line:.3f} (p = {alpha}; calibration of {cal.n} "
+           f"photos); the verdict's own line: {VERDICT_LINE} (p = {cal.p_value(1.0):.2f})", ""]
     for key in ("channel", "preset"):
-        out += [f"| untouched, by {key} | called inconsistent (95 % interval) |", "|---|---|"]
+        out += [f"| untouched, by {key} | over the verdict's line (95 % interval) "
+                f"| over the {100 * alpha:g} % line |", "|---|---|---|"]
         by = defaultdict(list)
         for r in untouched:
-            by[r[key]].append(r["statistic"] > line)
-        out += [f"| {k} | {_rate(v)} |" for k, v in sorted(by.items())]
-        out += [f"| all | {_rate(r['statistic'] > line for r in untouched)} |", ""]
+            by[r[key]].append(r["statistic"])
+        out += [f"| {k} | {_rate(t > VERDICT_LINE for t in v)} | {_rate(t > line for t in v)} |"
+                for k, v in sorted(by.items())]
+        ts = [r["statistic"] for r in untouched]
+        out += [f"| all | {_rate(t > VERDICT_LINE for t in ts)} | {_rate(t > line for t in ts)} |",
+                ""]
     neg = [r["statistic"] for r in untouched]
-    out += ["| kind | channel | caught (95 % interval) | AUC (95 % interval) | "
+    out += ["| kind | channel | caught at the verdict's line | at the "
+            f"{100 * alpha:g} % line | AUC (95 % interval) | "
             + " | ".join(f"AP {m}" for m in JUDGES) + " |",
-            "|---|---|---|---|" + "---|" * len(JUDGES)]
+            "|---|---|---|---|---|" + "---|" * len(JUDGES)]
     for kind in sorted({r["kind"] for r in edited}):
         mine = [r for r in edited if r["kind"] == kind]
         for ch in sorted({r["channel"] for r in mine}) + ["all"]:
@@ -102,7 +111,8 @@ def tables(rows: list[dict], cal) -> str:
                 v = [r["metrics"].get(f"patch_ap_{m}") for r in rs]
                 v = [x for x in v if x is not None]
                 aps.append(f"{np.mean(v):.3f}" if v else "–")
-            out.append(f"| {kind} | {ch} | {_rate(r['statistic'] > line for r in rs)} | "
+            out.append(f"| {kind} | {ch} | {_rate(r['statistic'] > VERDICT_LINE for r in rs)} "
+                       f"| {_rate(r['statistic'] > line for r in rs)} | "
                        f"{auc} | " + " | ".join(aps) + " |")
     return "\n".join(out)
 
