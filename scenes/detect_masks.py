@@ -198,7 +198,7 @@ def find_totems(image: np.ndarray, *, n: int | None = None, r_min: float | None 
         if min_score is not None:
             found = [f for f in found if f[1] >= min_score]
             if found and K is not None and ior is not None:   # and shows the photo
-                g = _glass(colour, [e for e, _ in found], K, ior)
+                g = glass.outline_scores(colour, [e for e, _ in found], K, ior)
                 found = [f for f, gi in zip(found, g) if gi >= MIN_GLASS]
         found = _apart(found)
         found = found if n is None else found[:n]
@@ -225,6 +225,15 @@ def _search(colour, r_min, r_max, keep) -> np.ndarray:
     return cands
 
 
+def _edge_fields(colour):
+    """What the outline fits read from the photo (H, W, 3): the gradient's orientation
+    field (:func:`silhouette.orientation_field`), its derivatives d/dx, d/dy after a
+    0.7 px blur, and their colour norm (H, W)."""
+    field = silhouette.orientation_field(colour, 1.0)
+    polish = silhouette.gradients(colour, 0.7)
+    return field, polish, np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
+
+
 def _fitted(colour, cands, K, ior=None) -> list:
     """Each candidate fitted to the silhouette and scored, (ellipse, score), best first;
     candidates whose fitted contour is not an edge all the way round are dropped. With
@@ -232,9 +241,7 @@ def _fitted(colour, cands, K, ior=None) -> list:
     if K is not None and ior is not None:
         return _fitted_keyed(colour, cands, K, ior)
     H, W = colour.shape[:2]
-    field = silhouette.orientation_field(colour, 1.0)
-    polish = silhouette.gradients(colour, 0.7)
-    edge = np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
+    field, polish, edge = _edge_fields(colour)
     found = []
     for cand in cands:
         ell = (silhouette.fit_ellipse(field, cand, (H, W), polish) if K is None
@@ -258,9 +265,7 @@ def _fitted_keyed(colour, cands, K, ior) -> list:
     :func:`glass_factor`. (ellipse, score), best first. See docs/decisions.md, 'masks:
     a wide fit around each candidate'."""
     H, W = colour.shape[:2]
-    field = silhouette.orientation_field(colour, 1.0)
-    polish = silhouette.gradients(colour, 0.7)
-    edge = np.sqrt((polish[0] ** 2 + polish[1] ** 2).sum(-1))
+    field, polish, edge = _edge_fields(colour)
     first = []
     for cand in cands:
         ell = silhouette.fit_cone(field, cand, K, (H, W), polish)
@@ -269,7 +274,7 @@ def _fitted_keyed(colour, cands, K, ior) -> list:
                           * np.clip(silhouette.busyness(ell, edge), 0.5, 1.3)))
     if not first:
         return []
-    g = _glass(colour, [e for e, _ in first], K, ior)
+    g = glass.outline_scores(colour, [e for e, _ in first], K, ior)
     first = sorted(((e, s * np.exp(GLASS_RANK * gi)) for (e, s), gi in zip(first, g)),
                    key=lambda t: -t[1])[:REFIT]
     final = []
@@ -284,23 +289,13 @@ def _fitted_keyed(colour, cands, K, ior) -> list:
     return sorted(((e, s * f) for (e, s), f in zip(final, g)), key=lambda t: -t[1])
 
 
-def _glass(colour, ellipses, K, ior) -> np.ndarray:
-    """(k,) :func:`scenes.glass.glass_scores` of each outline's circle (cv2 ellipses)."""
-    import cv2
-
-    inside = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_INSIDE_PX)
-    around = cv2.GaussianBlur(colour, (0, 0), glass.SIGMA_PX)
-    circles = np.array([(e[0][0], e[0][1], 0.25 * (e[1][0] + e[1][1])) for e in ellipses])
-    return glass.glass_scores(inside, around, circles, K, ior)
-
-
 def glass_factor(colour, ellipses, K, ior) -> np.ndarray:
     """(k,) ``exp(GLASS_WEIGHT * g)`` for each fitted outline (cv2 ellipses), ``g``
     :func:`scenes.glass.glass_scores` of its circle: how well the colours inside
     correlate with the photo where the key's sphere would send those pixels' rays. A
     glass sphere of the key shows the rest of the photo, inverted; an opaque ball or a
     ring of texture does not (the correlation is near 0 or below)."""
-    return np.exp(GLASS_WEIGHT * _glass(colour, ellipses, K, ior))
+    return np.exp(GLASS_WEIGHT * glass.outline_scores(colour, ellipses, K, ior))
 
 
 def _apart(found) -> list:

@@ -23,7 +23,7 @@ import numpy as np
 from scenes import camera
 
 __all__ = ["sphere_from_circle", "refract_sphere", "RHO_MAX", "DEPTHS", "SIGMA_PX",
-           "SIGMA_INSIDE_PX", "disc_pattern", "glass_scores"]
+           "SIGMA_INSIDE_PX", "disc_pattern", "glass_scores", "outline_scores"]
 
 RHO_MAX = 0.85
 """Pixels inside this fraction of the circle's radius are traced: nearer the rim the
@@ -152,6 +152,18 @@ def glass_scores(inside, around, circles, K, etas, *, pattern=None) -> np.ndarra
             pred = _sample(around, np.where(ok[..., None], uv, 0.0))
             best = np.maximum(best, _correlation(obs, pred, ok, max(8, n // 4), pat))
     return best
+
+
+def outline_scores(photo, ellipses, K, etas) -> np.ndarray:
+    """(k,) :func:`glass_scores` of each outline's circle, the outlines given as cv2
+    ellipses ((cx, cy), (A, B), angle) in pixels and ``photo`` (H, W, 3) float32 sRGB
+    unblurred (blurred here by :data:`SIGMA_INSIDE_PX` and :data:`SIGMA_PX`)."""
+    import cv2
+
+    inside = cv2.GaussianBlur(photo, (0, 0), SIGMA_INSIDE_PX)
+    around = cv2.GaussianBlur(photo, (0, 0), SIGMA_PX)
+    circles = np.array([(e[0][0], e[0][1], 0.25 * (e[1][0] + e[1][1])) for e in ellipses])
+    return glass_scores(inside, around, circles, K, etas)
 
 
 def _sample(img, pts):
