@@ -100,7 +100,7 @@ def scene_iou(scene_dir: Path, jpeg: int | None = None, rng=None, *,
         from scenes import jpeg as jpeg_mod
 
         img = jpeg_mod.decode(jpeg_mod.encode(img, quality=jpeg)).astype(np.float32)
-    listed = detect_masks.expected_totems(scene_dir)
+    listed = folder.expected_totems(scene_dir)
     told = None if listed is not None else scene.n_totems
     hints = None if rng is None else clicks(np.asarray(scene.masks, bool), rng)
     want = scene.n_totems if hints is not None else listed or told

@@ -47,8 +47,7 @@ import numpy as np
 from scenes import cone_fit, folder, glass, silhouette
 from scenes.errors import BadInput
 
-__all__ = ["find_totems", "ellipse_masks", "radius_range", "expected_totems", "key_iors",
-           "glass_factor", "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE",
+__all__ = ["find_totems", "ellipse_masks", "radius_range", "glass_factor", "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE",
            "GLASS_WEIGHT", "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS",
            "propose_masks", "draw_check", "write_masks"]
 
@@ -282,8 +281,9 @@ def _fitted_keyed(colour, cands, K, ior) -> list:
         (cx, cy), (A, B), _ = ell
         res = cone_fit.refit_cone(field, (cx, cy, 0.25 * (A + B)), K, (H, W), polish)
         al = silhouette.alignment(ell, field)
-        if res is not None and silhouette.alignment(res[0], field) > al:
-            ell, al = res[0], silhouette.alignment(res[0], field)
+        al_res = -np.inf if res is None else silhouette.alignment(res[0], field)
+        if al_res > al:
+            ell, al = res[0], al_res
         final.append((ell, max(al, 0.0)))
     g = glass_factor(colour, [e for e, _ in final], K, ior)
     return sorted(((e, s * f) for (e, s), f in zip(final, g)), key=lambda t: -t[1])
@@ -360,35 +360,6 @@ def _scene_K(scene_dir) -> np.ndarray | None:
         return None
 
 
-def expected_totems(scene_dir) -> int | None:
-    """How many totems the scene's key lists (``totems.json`` as a list), or None when
-    it gives one radius and IoR for all (or there is no key)."""
-    data = _key_entries(scene_dir)
-    return len(data) if isinstance(data, list) else None
-
-
-def key_iors(scene_dir) -> list | None:
-    """The indices of refraction the scene's key gives (one, or one per totem), or None
-    when there is no readable key."""
-    data = _key_entries(scene_dir)
-    entries = data if isinstance(data, list) else [data]
-    try:
-        iors = [float(e["ior"]) for e in entries]
-    except (TypeError, KeyError, ValueError):
-        return None
-    return iors if iors and all(1.0 < v < 4.0 for v in iors) else None
-
-
-def _key_entries(scene_dir):
-    """``totems.json`` as parsed JSON, or None when it is missing or not JSON."""
-    import json
-
-    try:
-        return json.loads((Path(scene_dir) / "totems.json").read_text())
-    except (OSError, ValueError, UnicodeDecodeError):
-        return None
-
-
 def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = None,
                 hints=None, radii=None) -> dict:
     """Give a scene folder totem masks, unless it has some, and a picture to check them.
@@ -397,7 +368,7 @@ def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = N
     overwritten; otherwise ``masks`` (or :func:`find_totems` of the photo, with
     ``hints`` and ``radii`` = (min, max) px) are written as ``totem_masks/totem_000.png``...
     (the folder appears complete or not at all). The number wanted is ``n``, else one
-    per hint, else as many as the key lists (:func:`expected_totems`). When fewer are
+    per hint, else as many as the key lists (:func:`scenes.folder.expected_totems`). When fewer are
     found, no mask is written and the summary says so (``complete`` false, ``found``,
     ``expected``, ``searched``). ``totem_masks_check.png`` (outlines over the photo) is
     (re)written either way.
@@ -422,8 +393,8 @@ def write_masks(scene_dir, masks: np.ndarray | None = None, *, n: int | None = N
         # wanted: then, with K and the key's IoR, the best that many whose final score
         # reaches MIN_KEYED count, else those whose ring score passes MIN_SCORE
         told = n or (len(hints) if hints is not None and len(hints) else None)
-        want = told or expected_totems(scene_dir)
-        K, ior = _scene_K(scene_dir), key_iors(scene_dir)
+        want = told or folder.expected_totems(scene_dir)
+        K, ior = _scene_K(scene_dir), folder.key_iors(scene_dir)
         keyed = bool(want and not told and K is not None and ior is not None)
         r_lo, r_hi = radius_range(image.shape, *(radii or (None, None)))
         found = find_totems(image, n=want if keyed else told, r_min=r_lo, r_max=r_hi, K=K,

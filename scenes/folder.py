@@ -23,6 +23,7 @@ from scenes.jpeg import JpegInfo
 __all__ = ["MAX_PIXELS", "MAX_FILE_BYTES", "IMAGE_FORMATS", "read_image", "read_mask",
            "write_image", "write_bytes", "write_json", "write_npy", "write_npz",
            "staged_folder", "safe_load_npy", "read_calib", "write_calib", "read_key",
+           "expected_totems", "key_iors",
            "key_fingerprint", "Scene", "find_calib", "PHOTO_NAMES", "photo_path",
            "read_jpeg_info", "read_parts", "read_scene", "Truth", "read_truth", "write_scene"]
 
@@ -55,6 +56,34 @@ def read_key(path, n_totems: int) -> tuple[np.ndarray, np.ndarray]:
         radius.append(r)
         ior.append(n)
     return np.array(radius), np.array(ior)
+
+
+def expected_totems(scene_dir) -> int | None:
+    """How many totems the scene's key lists (``totems.json`` as a list), or None when
+    it gives one radius and IoR for all (or there is no key)."""
+    data = _key_entries(scene_dir)
+    return len(data) if isinstance(data, list) else None
+
+
+def key_iors(scene_dir) -> list | None:
+    """The indices of refraction the scene's key gives (one, or one per totem), or None
+    when there is no readable key."""
+    data = _key_entries(scene_dir)
+    entries = data if isinstance(data, list) else [data]
+    try:
+        iors = [float(e["ior"]) for e in entries]
+    except (TypeError, KeyError, ValueError):
+        return None
+    return iors if iors and all(1.0 < v < 4.0 for v in iors) else None
+
+
+def _key_entries(scene_dir):
+    """``totems.json`` as parsed JSON, or None when it is missing or not JSON (read
+    before the masks are known, so nothing is checked against them)."""
+    try:
+        return json.loads((Path(scene_dir) / "totems.json").read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
 
 
 def _check_key(radius, ior, *, where: str) -> tuple[float, float]:

@@ -14,6 +14,7 @@ import numpy as np
 
 __all__ = ["orientation_field", "gradients", "ellipse_points", "remap", "edge_at",
            "orientation_at", "edge_along", "orientation_along", "cone_points",
+           "cones_points", "cone_fit_q", "cone_ellipse",
            "ellipse_mask", "MIN_AXIS_RATIO", "GRID_SHIFTS", "GRID_SIZES", "fit_cone",
            "fit_ellipse", "sphere_like", "support", "busyness", "alignment", "arc_support"]
 
@@ -108,24 +109,33 @@ def cone_points(q, K, n: int = 180):
     silhouette is exactly this curve (an ellipse elongated away from the principal
     point), whatever the sphere's radius: three parameters instead of an ellipse's five.
     """
+    pts, nrm = cones_points(np.asarray(q, np.float64)[None], K, n)
+    return pts[0], nrm[0]
+
+
+def cones_points(qs, K, n: int = 180):
+    """:func:`cone_points` of many cones ``qs`` (m, 3) at once: points (m, n, 2) and unit
+    outward normals (m, n, 2), pixels."""
     from scenes.camera import pixel_rays, project
 
-    u0, v0, s = q
-    axis = pixel_rays(K, u0, v0)
-    h = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    qs = np.asarray(qs, np.float64).reshape(-1, 3)
+    K = np.asarray(K, np.float64)
+    axis = pixel_rays(K, qs[:, 0], qs[:, 1])                                # (m, 3)
+    h = np.where((np.abs(axis[:, 1]) < 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
     e1 = np.cross(h, axis)
-    e1 /= np.linalg.norm(e1)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
     e2 = np.cross(axis, e1)
     t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    ring = np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2
+    ring = np.cos(t)[None, :, None] * e1[:, None] + np.sin(t)[None, :, None] * e2[:, None]
 
     def image(alpha):
-        return project(K, np.cos(alpha) * axis + np.sin(alpha) * ring)
+        X = np.cos(alpha)[:, None, None] * axis[:, None] + np.sin(alpha)[:, None, None] * ring
+        return project(K, X.reshape(-1, 3)).reshape(len(qs), n, 2)
 
-    alpha = np.arctan(abs(s) / K[0, 0])
+    alpha = np.arctan(np.abs(qs[:, 2]) / K[0, 0])
     pts = image(alpha)
     nrm = image(alpha + 1e-4) - pts
-    return pts, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+    return pts, nrm / np.linalg.norm(nrm, axis=2, keepdims=True)
 
 
 def ellipse_mask(ell, shape) -> np.ndarray:
@@ -148,31 +158,52 @@ def fit_cone(field, cand, K, shape, polish=None):
     (:data:`GRID_SIZES`) around the candidate circle. Returns the cone's image as a
     cv2 ellipse, or None (as :func:`fit_ellipse`).
     """
-    import cv2
+    q, _ = cone_fit_q(field, cand, K, polish, shifts=GRID_SHIFTS, sizes=GRID_SIZES,
+                      keep=2, n=180)
+    if not np.isfinite(q).all():
+        return None
+    return sphere_like(cone_ellipse(q, K), cand, shape)
+
+
+def cone_fit_q(field, cand, K, polish, *, shifts, sizes, keep: int, n: int):
+    """The tangent cone q = (u0, v0, s) whose image's normals the gradient ``field``
+    lines up with best, by Nelder-Mead from the ``keep`` best of the grid ``shifts``
+    (radii) x ``shifts`` x ``sizes`` (times the radius) around the circle ``cand``
+    (cx, cy, r), each outline read at ``n`` points; then, with ``polish`` (d/dx, d/dy
+    of :func:`gradients`), moved to the steepest mean step across it. Returns (q, the
+    alignment before that step)."""
     from scipy.optimize import minimize
 
-    a_f, b_f = field
     cx, cy, r = (float(v) for v in cand[:3])
 
-    def cost(q):
-        return -orientation_at(*cone_points(q, K), a_f, b_f).mean() if q[2] > 2 else 0.0
+    def alignment_of(qs):
+        qs = np.asarray(qs, np.float64).reshape(-1, 3)
+        pts, nrm = cones_points(qs, K, n)
+        al = orientation_at(pts.reshape(-1, 2), nrm.reshape(-1, 2), *field)
+        return np.where(qs[:, 2] > 2, al.reshape(len(qs), n).mean(1), 0.0)
 
-    grid = [np.array([cx + du * r, cy + dv * r, k * r]) for du in GRID_SHIFTS
-            for dv in GRID_SHIFTS for k in GRID_SIZES]
-    starts = sorted(grid, key=cost)[:2]
-    fits = [minimize(cost, q0, method="Nelder-Mead",
+    grid = np.array([(cx + du * r, cy + dv * r, k * r) for du in shifts
+                     for dv in shifts for k in sizes])
+    starts = grid[np.argsort(-alignment_of(grid), kind="stable")[:keep]]
+    fits = [minimize(lambda q: -alignment_of(q)[0], q0, method="Nelder-Mead",
                      options=dict(xatol=0.02, fatol=1e-6, maxiter=300)) for q0 in starts]
-    q = min(fits, key=lambda f: f.fun).x
+    best = min(fits, key=lambda f: f.fun)
+    q = best.x
     if polish is not None:              # sub-pixel: the steepest step near that contour
         gx, gy = polish
         q = minimize(lambda q: -edge_at(*cone_points(q, K), gx, gy).mean()
                      if q[2] > 2 else 0.0, q, method="Nelder-Mead",
                      options=dict(xatol=0.01, fatol=1e-8, maxiter=300)).x
-    if not np.isfinite(q).all():
-        return None
+    return q, -float(best.fun)
+
+
+def cone_ellipse(q, K):
+    """The image of the tangent cone ``q`` as (cx, cy, a, b, angle_rad), pixels: the
+    ellipse cv2 fits to 90 of its points."""
+    import cv2
+
     (ex, ey), (A, B), ang = cv2.fitEllipse(cone_points(q, K, 90)[0].astype(np.float32))
-    ell = (float(ex), float(ey), A / 2.0, B / 2.0, np.radians(ang))
-    return sphere_like(ell, cand, shape)
+    return (float(ex), float(ey), A / 2.0, B / 2.0, np.radians(ang))
 
 
 def fit_ellipse(field, cand, shape, polish=None):
