@@ -31,8 +31,6 @@ import numpy as np
 from verify.calibration import clopper_pearson, load, statistic_of
 
 JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
-VERDICT_LINE = 1.0
-"""The statistic over which the verdict says inconsistent (``verify.verdict``)."""
 
 
 def load_runs(bench_dirs) -> list[dict]:
@@ -59,6 +57,11 @@ def _rate(flags) -> str:
     return f"{k} of {n} ({100 * k / n:.0f} %, {100 * lo:.0f}-{100 * hi:.0f} %)"
 
 
+def _called(run) -> bool:
+    """Whether the verdict itself called the photo inconsistent (its own line)."""
+    return run["verdict"] == "inconsistent"
+
+
 def auc(neg, pos) -> float:
     """ROC AUC of ``pos`` above ``neg``: the chance a manipulated photo outscores an
     untouched one, ties counted half (Mann-Whitney)."""
@@ -80,19 +83,20 @@ def tables(rows: list[dict], cal) -> str:
     untouched = [r for r in rows if r["kind"] == "none"]
     edited = [r for r in rows if r["kind"] != "none"]
     alpha, line = cal.alpha, cal.line()
+    own = {r["threshold"] for r in rows}
     out = [f"calibrated line: statistic {line:.3f} (p = {alpha}; calibration of {cal.n} "
-           f"photos); the verdict's own line: {VERDICT_LINE} (p = {cal.p_value(1.0):.2f})", ""]
+           f"photos); the verdict's own line: {', '.join(f'{t:g}' for t in sorted(own))} "
+           f"(p = {', '.join(f'{cal.p_value(t):.2f}' for t in sorted(own))})", ""]
     for key in ("channel", "preset"):
         out += [f"| untouched, by {key} | over the verdict's line (95 % interval) "
                 f"| over the {100 * alpha:g} % line |", "|---|---|---|"]
         by = defaultdict(list)
         for r in untouched:
-            by[r[key]].append(r["statistic"])
-        out += [f"| {k} | {_rate(t > VERDICT_LINE for t in v)} | {_rate(t > line for t in v)} |"
-                for k, v in sorted(by.items())]
-        ts = [r["statistic"] for r in untouched]
-        out += [f"| all | {_rate(t > VERDICT_LINE for t in ts)} | {_rate(t > line for t in ts)} |",
-                ""]
+            by[r[key]].append(r)
+        out += [f"| {k} | {_rate(_called(r) for r in v)} | "
+                f"{_rate(r['statistic'] > line for r in v)} |" for k, v in sorted(by.items())]
+        out += [f"| all | {_rate(_called(r) for r in untouched)} | "
+                f"{_rate(r['statistic'] > line for r in untouched)} |", ""]
     neg = [r["statistic"] for r in untouched]
     out += ["| kind | channel | caught at the verdict's line | at the "
             f"{100 * alpha:g} % line | AUC (95 % interval) | "
@@ -111,7 +115,7 @@ def tables(rows: list[dict], cal) -> str:
                 v = [r["metrics"].get(f"patch_ap_{m}") for r in rs]
                 v = [x for x in v if x is not None]
                 aps.append(f"{np.mean(v):.3f}" if v else "–")
-            out.append(f"| {kind} | {ch} | {_rate(r['statistic'] > VERDICT_LINE for r in rs)} "
+            out.append(f"| {kind} | {ch} | {_rate(_called(r) for r in rs)} "
                        f"| {_rate(r['statistic'] > line for r in rs)} | "
                        f"{auc} | " + " | ".join(aps) + " |")
     return "\n".join(out)
