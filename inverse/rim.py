@@ -15,7 +15,11 @@ the rim wherever a person's mask put it within that reach.
 
 The strongest edge near a glass sphere's rim lies on or just inside its silhouette
 (the rim reflects more as the incidence grows grazing); see docs/decisions.md, "pose:
-the rim from the photo's edges".
+the rim from the photo's edges". On some totems the inner edge of the rim's reflection
+band, 1.5-4 px inside, is the stronger; the mask is evidence too, so the size search
+weighs each size's edge by a Gaussian of its distance from the mask's own outline
+(``MASK_SIGMA_PX``, the slop of a mask as people draw it); see docs/decisions.md, "pose:
+the edge weighed by the mask's size".
 """
 
 from __future__ import annotations
@@ -24,13 +28,14 @@ import numpy as np
 
 from scenes import camera, silhouette
 
-__all__ = ["SIGMA_PX", "SHIFT_PX", "GROW_PX", "N_POINTS", "READ_PX", "outline", "edge_score",
-           "refine_centre", "refine_centres"]
+__all__ = ["SIGMA_PX", "SHIFT_PX", "GROW_PX", "N_POINTS", "MASK_SIGMA_PX", "READ_PX",
+           "outline", "edge_score", "refine_centre", "refine_centres"]
 
 SIGMA_PX = 1.0       # blur before the derivative (pixels)
 SHIFT_PX = 2.5       # how far sideways the search moves the mask's outline (pixels)
 GROW_PX = 4.5        # how far the search grows or shrinks the mask's outline (pixels)
 N_POINTS = 180       # outline points scored
+MASK_SIGMA_PX = 2.0  # how far a mask's outline lies from the silhouette (pixels, 1 sd)
 READ_PX = int(np.ceil(SHIFT_PX + GROW_PX + 4 * SIGMA_PX))
 """How far outside a mask the search reads the photo (pixels): the reach plus the
 blur's support; the fit's fingerprint covers that band."""
@@ -63,9 +68,12 @@ def _moved(P0, R: float, K, x) -> np.ndarray:
 
 
 def refine_centre(P0, R: float, K, grad, *, shift_px: float = SHIFT_PX,
-                  grow_px: float = GROW_PX) -> np.ndarray:
+                  grow_px: float = GROW_PX,
+                  mask_sigma_px: float = MASK_SIGMA_PX) -> np.ndarray:
     """The centre (3,) metres whose outline the photo's edges support best, within
-    ``shift_px`` sideways and ``grow_px`` in size of ``P0``'s outline."""
+    ``shift_px`` sideways and ``grow_px`` in size of ``P0``'s outline; the size is
+    chosen first, by its edge times ``exp(-g^2 / (2 mask_sigma_px^2))`` for an outline
+    ``g`` pixels larger than ``P0``'s."""
     from scipy.optimize import minimize
 
     K = np.asarray(K, np.float64)
@@ -78,8 +86,10 @@ def refine_centre(P0, R: float, K, grad, *, shift_px: float = SHIFT_PX,
 
     # The size first, about the mask's centre: a circle the size of the rim but
     # off-centre can line up with edges inside the glass, a concentric one seldom does.
-    sizes = [(0.0, 0.0, g) for g in np.arange(-grow_px + 0.5, grow_px - 0.49, 0.25)]
-    x0 = np.array(min(sizes, key=cost), float)
+    g = np.arange(-grow_px + 0.5, grow_px - 0.49, 0.25)
+    edge = np.array([-cost(np.array([0.0, 0.0, x])) for x in g])
+    weighed = edge * np.exp(-0.5 * (g / mask_sigma_px) ** 2)
+    x0 = np.array([0.0, 0.0, g[np.argmax(weighed if edge.max() > 0 else edge)]])
     reach = np.array([shift_px, shift_px, min(grow_px, abs(x0[2]) + 1.0)])
     simplex = x0 + np.vstack([np.zeros(3), 0.3 * np.eye(3)])
     res = minimize(cost, x0, method="Nelder-Mead",
