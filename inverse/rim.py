@@ -87,7 +87,8 @@ def refine_centre(P0, R: float, K, grad, *, shift_px: float = SHIFT_PX,
     # The size first, about the mask's centre: a circle the size of the rim but
     # off-centre can line up with edges inside the glass, a concentric one seldom does.
     g = np.arange(-grow_px + 0.5, grow_px - 0.49, 0.25)
-    edge = np.array([-cost(np.array([0.0, 0.0, x])) for x in g])
+    edge = np.array([edge_score(_moved(P0, R, K, np.array([0.0, 0.0, x])), R, K, grad)
+                     for x in g])
     weighed = edge * np.exp(-0.5 * (g / mask_sigma_px) ** 2)
     x0 = np.array([0.0, 0.0, g[np.argmax(weighed if edge.max() > 0 else edge)]])
     reach = np.array([shift_px, shift_px, min(grow_px, abs(x0[2]) + 1.0)])

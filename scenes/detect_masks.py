@@ -47,8 +47,8 @@ import numpy as np
 from scenes import cone_fit, folder, glass, silhouette
 from scenes.errors import BadInput
 
-__all__ = ["find_totems", "ellipse_masks", "radius_range", "glass_factor", "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE",
-           "GLASS_WEIGHT", "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS",
+__all__ = ["find_totems", "ellipse_masks", "radius_range", "glass_factor", "MIN_SUPPORT_FIT",
+           "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE", "GLASS_WEIGHT", "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS",
            "propose_masks", "draw_check", "write_masks"]
 
 MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (silhouette.support)

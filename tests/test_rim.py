@@ -94,23 +94,17 @@ def test_the_mask_tells_the_silhouette_from_a_stronger_band_inside():
     seed 11's totems): from the exact mask, or one grown by 2 px, the search keeps the
     silhouette; by the edge alone (no weight for the mask's size) it takes the band,
     over 10 % too far."""
-    from scenes import camera
+    from scenes import camera, silhouette
 
     W, H = 320, 240
     K = camera.intrinsics(W, H, 60.0)
     P, R = np.array([0.1, 0.05, 1.0]), 0.1
     img = _band_disc(W, H, K, P, R, 4.0, (0.1, 0.16))
-    grad = rim_grad(img)
+    grad = silhouette.gradients(img, rim.SIGMA_PX)
     err = lambda Q: np.linalg.norm(Q - P) / np.linalg.norm(P)
     for start in (P, P * 0.94):                           # exact, and about 2 px larger
         assert err(rim.refine_centre(start, R, K, grad)) < 0.01
     assert err(rim.refine_centre(P, R, K, grad, mask_sigma_px=np.inf)) > 0.1
-
-
-def rim_grad(img):
-    from scenes import silhouette
-
-    return silhouette.gradients(img, rim.SIGMA_PX)
 
 
 def test_drawn_mask_families_differ_as_described():
