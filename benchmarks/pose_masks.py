@@ -4,7 +4,7 @@ the photo's edges (``inverse.rim``), against the truth.
     python benchmarks/pose_masks.py SCENE... [--families a,b] [--seed N] [--jpeg Q]
 
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
-``scenes.drawn_masks`` (and ``auto``: the masks ``totems masks`` proposes), prints the
+``scenes.drawn_masks`` (``exact``: the rendered masks, and ``auto``: the masks ``totems masks`` proposes), prints the
 pose error as a percentage of the totem's distance, median and worst, for the mask's
 own pose and for the photo's. ``--jpeg Q``: the photo through a JPEG of quality Q first.
 Seconds per photo; no fit.
@@ -48,6 +48,8 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             except BadInput:
                 out[name] = [(np.nan, np.nan)] * scene.n_totems
                 continue
+        elif name == "exact":
+            masks = np.asarray(scene.masks, bool)
         else:
             masks = np.stack([drawn_masks.family(name, m, rng) for m in scene.masks])
         rows = []
@@ -69,7 +71,7 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="+", type=Path)
-    p.add_argument("--families", default=",".join(list(drawn_masks.FAMILIES) + ["auto"]))
+    p.add_argument("--families", default=",".join(["exact"] + list(drawn_masks.FAMILIES) + ["auto"]))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jpeg", type=int, default=None)
     args = p.parse_args(argv)

@@ -47,8 +47,9 @@ import numpy as np
 from scenes import cone_fit, folder, glass, silhouette
 from scenes.errors import BadInput
 
-__all__ = ["find_totems", "ellipse_masks", "radius_range", "glass_factor", "MIN_SUPPORT_FIT",
-           "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE", "GLASS_WEIGHT", "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS",
+__all__ = ["find_totems", "ellipse_masks", "radius_range", "glass_factor",
+           "MIN_SUPPORT_FIT", "MIN_SCORE", "MAX_CANDIDATES", "WORK_SIZE", "GLASS_WEIGHT",
+           "GLASS_RANK", "REFIT", "MIN_KEYED", "MIN_GLASS", "HINT_POOL", "HINT_FITS",
            "propose_masks", "draw_check", "write_masks"]
 
 MIN_SUPPORT_FIT = 0.05   # worst-quarter edge alignment of a fitted contour (silhouette.support)
@@ -60,6 +61,8 @@ GLASS_RANK = 4.0         # first ranking of the fits: arc support times exp(GLAS
 REFIT = 24               # the best this many first fits are re-fitted over a wide basin
 MIN_KEYED = 0.7          # final score of a totem when only the key's list says how many,
 MIN_GLASS = 0.05         # and its glass score (glass.glass_scores)
+HINT_POOL = 400          # ring candidates searched around a hint,
+HINT_FITS = 16           # the best this many that hold it fitted
 
 
 def _candidates(img: np.ndarray, r_min: float, r_max: float, keep: int) -> np.ndarray:
@@ -310,8 +313,9 @@ def _apart(found) -> list:
 
 
 def _best_near(colour, hint, r_min, r_max, K, ior=None):
-    """The best totem whose fitted outline holds the pixel ``hint`` (x, y), searched in
-    a window around it, or None."""
+    """The best totem whose fitted outline holds the pixel ``hint`` (x, y), or None: the
+    best :data:`HINT_FITS` of the window's :data:`HINT_POOL` ring candidates that hold
+    the hint are fitted (the best rings of a textured floor seldom hold it)."""
     H, W = colour.shape[:2]
     x, y = hint
     if not (0 <= x < W and 0 <= y < H):
@@ -319,11 +323,11 @@ def _best_near(colour, hint, r_min, r_max, K, ior=None):
     half = int(np.ceil(2.2 * r_max)) + 4
     x0, y0 = max(0, int(x) - half), max(0, int(y) - half)
     crop = np.ascontiguousarray(colour[y0:int(y) + half + 1, x0:int(x) + half + 1])
-    cands = _search(crop, r_min, min(r_max, 0.45 * min(crop.shape[:2])), 16)
+    cands = _search(crop, r_min, min(r_max, 0.45 * min(crop.shape[:2])), HINT_POOL)
     cands[:, 0] += x0
     cands[:, 1] += y0
     holds = np.hypot(cands[:, 0] - x, cands[:, 1] - y) < cands[:, 2]
-    fitted = [f for f in _fitted(colour, cands[holds], K, ior)
+    fitted = [f for f in _fitted(colour, cands[holds][:HINT_FITS], K, ior)
               if np.hypot(f[0][0][0] - x, f[0][0][1] - y) < 0.5 * max(f[0][1])]
     return fitted[0] if fitted else None
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from scenes import folder
-from scenes.detect_masks import propose_masks, write_masks
+from scenes.detect_masks import ellipse_masks, find_totems, propose_masks, write_masks
 from scenes.errors import BadInput
 from verify.cli import EXIT_INCOMPLETE
 
@@ -166,6 +166,38 @@ def test_hints_find_each_totem_and_the_key_sets_the_count(tmp_path):
     # the key alone sets how many are wanted: all four found, in order
     out2 = write_masks(_folder_with_key(tmp_path / "t", img, 4))
     assert out2["complete"] and out2["n"] == 4
+
+
+def _totem_among_coins():
+    """A 320x240 photo: a glass-like totem (r = 24 px, an inverted copy of the wall with
+    a dark rim) amid a grid of black and white coins whose sharp rings outrank it; and
+    the totem's true mask."""
+    H, W = 240, 320
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    img = np.stack([0.5 + 0.1 * np.sin(u / 11) * np.cos(v / 17),
+                    0.45 + 0.1 * np.cos((u - v) / 23),
+                    0.4 + 0.1 * np.sin(v / 9 + u / 31)], -1)
+    rho = np.hypot(u - 150, v - 118) / 24.0
+    mask = rho < 1
+    img[mask] = img[::-1, ::-1][mask] * (0.95 - 0.7 * rho[mask][:, None] ** 4)
+    k = 0
+    for y in np.arange(22, H - 10, 44):
+        for x in np.arange(22, W - 10, 44):
+            if np.hypot(x - 150, y - 118) >= 48:
+                img[(u - x) ** 2 + (v - y) ** 2 < 17 ** 2] = 0.05 if k % 2 else 0.95
+                k += 1
+    noise = np.random.default_rng(0).normal(0, 0.01, img.shape)
+    return np.clip(img + noise, 0, 1).astype(np.float32), mask
+
+
+def test_a_click_finds_its_totem_among_stronger_rings():
+    # The window around a click holds dozens of coins whose rings outrank the totem's:
+    # only the candidates that hold the click are fitted, so the totem is found.
+    img, truth = _totem_among_coins()
+    found = find_totems(img, hints=[(156.0, 113.0)])
+    assert len(found) == 1
+    mask = ellipse_masks(found, img.shape)[0]
+    assert (mask & truth).sum() / (mask | truth).sum() >= 0.95
 
 
 def test_a_hint_outside_the_photo_is_bad_input(tmp_path):
