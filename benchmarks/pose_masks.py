@@ -4,9 +4,9 @@ the photo's edges (``inverse.rim``), against the truth.
     python benchmarks/pose_masks.py SCENE... [--families a,b] [--seed N] [--jpeg Q]
 
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
-``scenes.drawn_masks`` (``exact``: the rendered masks, and ``auto``: the masks ``totems masks`` proposes), prints the
-pose error as a percentage of the totem's distance, median and worst, for the mask's
-own pose and for the photo's. ``--jpeg Q``: the photo through a JPEG of quality Q first.
+``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
+``totems masks`` proposes), prints the pose error as a percentage of the totem's
+distance, median and worst, for the mask's own pose and for the photo's. ``--jpeg Q``: the photo through a JPEG of quality Q first.
 Seconds per photo; no fit.
 """
 
@@ -71,7 +71,8 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="+", type=Path)
-    p.add_argument("--families", default=",".join(["exact"] + list(drawn_masks.FAMILIES) + ["auto"]))
+    p.add_argument("--families",
+                   default=",".join(["exact"] + list(drawn_masks.FAMILIES) + ["auto"]))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jpeg", type=int, default=None)
     args = p.parse_args(argv)
