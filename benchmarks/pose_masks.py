@@ -6,8 +6,8 @@ the photo's edges (``inverse.rim``), against the truth.
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
 ``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
-distance, median and worst, for the mask's own pose and for the photo's. ``--jpeg Q``: the photo through a JPEG of quality Q first.
-Seconds per photo; no fit.
+distance, median and worst, for the mask's own pose and for the photo's. ``--jpeg Q``:
+the photo through a JPEG of quality Q first. Seconds per photo; no fit.
 """
 
 from __future__ import annotations
