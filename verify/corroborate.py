@@ -52,6 +52,7 @@ from inverse.rays import TotemRays
 from inverse.sweep import slice_colours
 from scenes.colour import linear_to_srgb
 from verify.patches import chroma
+from verify.resolution import blur_varying
 
 __all__ = ["CELL_PX", "N_SLICES", "SIGMA_CELLS", "COS_EVIDENCE", "MIN_TOTEMS",
            "map_res", "cell_centres", "cell_errors", "corroboration", "unseen"]
@@ -124,7 +125,7 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.n
 def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
                   cell_px: float = CELL_PX, n_slices: int = N_SLICES,
                   sigma: float = SIGMA_CELLS, cos_evidence: float = COS_EVIDENCE,
-                  min_totems: int = MIN_TOTEMS) -> np.ndarray:
+                  min_totems: int = MIN_TOTEMS, photo_sigma=None) -> np.ndarray:
     """How far each photo pixel's hue is from what ``min_totems`` totems saw along its ray.
 
     Parameters
@@ -133,6 +134,8 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     frame : the fit's frustum frame: the map covers its ``(s, t)`` range and depths.
     image : (H, W, 3) the photo, sRGB [0, 1].
     cell_px, n_slices, sigma, cos_evidence, min_totems : see the module constants.
+    photo_sigma : the photo's blur (pixels, a number or an (H, W) map,
+        :mod:`verify.resolution`); default the rays' splat, ``sigma * cell_px``.
 
     Returns
     -------
@@ -147,7 +150,8 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
     sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame, res, n_slices=n_slices,
                        sigma=sigma)
-    blurred = ndimage.gaussian_filter(chroma(image), (sigma * cell_px, sigma * cell_px, 0))
+    blurred = blur_varying(chroma(image),
+                           sigma * cell_px if photo_sigma is None else photo_sigma)
     uu, vv = cell_centres(frame, res)
     E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
     return cells_to_pixels(E, frame, (W, H))

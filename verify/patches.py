@@ -17,8 +17,9 @@ heatmaps compare one to one:
   higher is more suspicious, like L1.
 - ``CHROMA/heatmap.npy`` (ours, not the NeRF path's) is the mean over the patch's
   worst tenth of pixels (``TOP_FRACTION``, as for CORROB and UNSEEN) of
-  :func:`chroma_distance`: how far the photo's hue lies outside what the
-  reconstruction shows within ``CHROMA_RADIUS_PX``, sRGB [0, 1]. It ignores the two errors a
+  :func:`chroma_distance`: how far the photo's hue, blurred to the evidence's resolution
+  (:mod:`verify.resolution`), lies outside what the reconstruction shows within
+  ``CHROMA_RADIUS_PX``, sRGB [0, 1]. It ignores the two errors a
   reconstruction from the totems makes everywhere (brightness, and edges a few pixels
   off) and keeps the one an edit makes (a colour that is not there).
 - ``CORROB/heatmap.npy`` (ours) is the worst tenth's mean of
@@ -53,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.errors import BadInput
+from verify.resolution import blur_varying
 
 __all__ = ["GRID", "PATCH_PX", "MIN_PATCH_PX", "NERF_L1_SCALE", "MANIP_FRACTION",
            "CHROMA_RADIUS_PX", "TOP_FRACTION", "POOLED_BY_WORST", "CHROMA_BLUR_PX",
@@ -97,9 +99,10 @@ POOLED_BY_WORST = ("CHROMA", "CORROB", "UNSEEN", "ABSENT")
 NeRF path writes them, RANGE) are patch means."""
 
 CHROMA_BLUR_PX = 3.0
-"""Gaussian sigma (pixels) applied to the photo's chroma first: the reconstruction has no
-detail finer than its totem rays' spacing (about 3 px at 640x480), so neither should the
-photo it is compared with."""
+"""Gaussian sigma (pixels) applied to the photo first when no map of the rays' spacing is
+given (:mod:`verify.resolution` gives one per pixel, at least this): the reconstruction
+has no detail finer than its totem rays' spacing (about 3 px at 640x480), so neither
+should the photo it is compared with."""
 
 METRICS = ("L1", "SSIM", "CHROMA", "RANGE", "CORROB", "UNSEEN", "ABSENT")
 """Every heatmap verify writes; CORROB (:mod:`verify.corroborate`) and ABSENT
@@ -230,12 +233,15 @@ def patch_scores(errors: dict[str, np.ndarray], grid: PatchGrid,
             for name, err in errors.items()}
 
 
-def pixel_errors(image: np.ndarray, recon: np.ndarray) -> dict[str, np.ndarray]:
+def pixel_errors(image: np.ndarray, recon: np.ndarray, *, sigma=CHROMA_BLUR_PX,
+                 chroma_sigma=None) -> dict[str, np.ndarray]:
     """Per-pixel disagreement maps between photo and reconstruction.
 
     Parameters
     ----------
     image, recon : (H, W, 3) sRGB in [0, 1].
+    sigma, chroma_sigma : the photo's blur (pixels, a number or an (H, W) map,
+        :mod:`verify.resolution`) before RANGE and before CHROMA (default ``sigma``).
 
     Returns
     -------
@@ -257,8 +263,10 @@ def pixel_errors(image: np.ndarray, recon: np.ndarray) -> dict[str, np.ndarray]:
     _, S = structural_similarity(image, recon, channel_axis=2, data_range=1.0, full=True,
                                  gaussian_weights=True, sigma=1.5,
                                  use_sample_covariance=False)
-    return {"L1": l1, "SSIM": 1.0 - S.mean(axis=2), "CHROMA": chroma_distance(image, recon),
-            "RANGE": range_distance(image, recon)}
+    chroma_sigma = sigma if chroma_sigma is None else chroma_sigma
+    return {"L1": l1, "SSIM": 1.0 - S.mean(axis=2),
+            "CHROMA": chroma_distance(image, recon, sigma=chroma_sigma),
+            "RANGE": range_distance(image, recon, sigma=sigma)}
 
 
 def chroma(rgb: np.ndarray) -> np.ndarray:
@@ -269,11 +277,11 @@ def chroma(rgb: np.ndarray) -> np.ndarray:
 
 
 def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
-                    radius: int = CHROMA_RADIUS_PX,
-                    sigma: float = CHROMA_BLUR_PX) -> np.ndarray:
+                    radius: int = CHROMA_RADIUS_PX, sigma=CHROMA_BLUR_PX) -> np.ndarray:
     """How far each photo pixel's chroma lies outside the reconstruction's nearby range.
 
-    The photo's :func:`chroma` is blurred by a Gaussian of ``sigma`` px; the
+    The photo's :func:`chroma` is blurred by a Gaussian of ``sigma`` px (a number, or
+    an (H, W) map, :func:`verify.resolution.blur_varying`); the
     reconstruction's gives, per channel, a lowest and a highest value over the
     ``(2 radius + 1)``-pixel square around the pixel. The distance is how far the photo's
     value falls outside ``[lowest, highest]``, averaged over the channels: zero wherever
@@ -297,8 +305,7 @@ def chroma_distance(image: np.ndarray, recon: np.ndarray, *,
 
 
 def range_distance(image: np.ndarray, recon: np.ndarray, *,
-                   radius: int = CHROMA_RADIUS_PX,
-                   sigma: float = CHROMA_BLUR_PX) -> np.ndarray:
+                   radius: int = CHROMA_RADIUS_PX, sigma=CHROMA_BLUR_PX) -> np.ndarray:
     """How far each photo pixel's colour lies outside the reconstruction's nearby range.
 
     :func:`chroma_distance` on the sRGB values themselves: brightness counts too, so a
@@ -314,13 +321,14 @@ def range_distance(image: np.ndarray, recon: np.ndarray, *,
 
 
 def outside_range(photo: np.ndarray, recon: np.ndarray, *, radius: int,
-                  sigma: float) -> np.ndarray:
-    """Per pixel, how far ``photo`` (blurred by a Gaussian of ``sigma`` px) falls
-    outside ``[lowest, highest]`` of ``recon`` over the ``(2 radius + 1)``-pixel square
-    around it, per channel, averaged over the channels. Both (H, W, C), same units."""
+                  sigma) -> np.ndarray:
+    """Per pixel, how far ``photo`` (blurred by a Gaussian of ``sigma`` px, a number or
+    an (H, W) map) falls outside ``[lowest, highest]`` of ``recon`` over the
+    ``(2 radius + 1)``-pixel square around it, per channel, averaged over the channels.
+    Both (H, W, C), same units."""
     from scipy import ndimage
 
-    photo = ndimage.gaussian_filter(np.asarray(photo, np.float64), (sigma, sigma, 0))
+    photo = blur_varying(photo, sigma)
     recon = np.asarray(recon, np.float64)
     k = (2 * int(radius) + 1, 2 * int(radius) + 1, 1)
     low = ndimage.minimum_filter(recon, size=k, mode="nearest")

@@ -18,7 +18,7 @@ import numpy as np
 from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.errors import BadInput
-from verify import absence, corroborate, html_report, patches, region
+from verify import absence, corroborate, html_report, patches, region, resolution
 from verify import verdict as verdict_mod
 
 __all__ = ["VIS_FLOOR", "Report", "sphere_silhouette", "mask_iou", "verify_scene",
@@ -172,11 +172,18 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                                         n_totem_pixels=int(totem_mask.sum()),
                                         shape=region_shape)
     grid = patches.patch_grid(totem_mask)
-    errors = patches.pixel_errors(image, recon)
+    # the photo is compared at the evidence's resolution (verify.resolution)
+    spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
+    hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
+    hue_sigma = resolution.photo_sigma(spacing, hue)
+    errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
+                                  chroma_sigma=hue_sigma)
     rays = getattr(fit, "rays", None)
     if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)
-        errors["CORROB"] = corroborate.corroboration(rays, frame, image)
+        splat_px = corroborate.SIGMA_CELLS * corroborate.CELL_PX
+        errors["CORROB"] = corroborate.corroboration(
+            rays, frame, image, photo_sigma=np.maximum(hue_sigma, splat_px))
         errors["ABSENT"] = absence.absence(rays, frame, image, totem_mask, scene.K,
                                            getattr(fit, "recon_depth", None))
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
