@@ -133,7 +133,9 @@ def main(argv=None) -> int:
     except BadInput as e:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
         return 2
+    seeds = sorted({r["seed"] for r in rows})
     source = {"set": "calibration", "photos": len(rows),
+              "seeds": f"{seeds[0]}-{seeds[-1]}",
               "presets": sorted({r["preset"] for r in rows}),
               "channels": sorted({r["channel"] for r in rows}),
               "totems": sorted({r["totems"] for r in rows}),

@@ -111,6 +111,7 @@ def test_the_calibration_refuses_the_benchmarks_seeds(tmp_path, capsys):
     assert calibrate_verdict.main([str(bench), "--write", str(out)]) == 0
     cal = calibration.load(out)
     assert cal.n == 24 and cal.source["channels"] == ["jpeg75", "pristine"]
+    assert cal.source["seeds"] == "11-18"
     printed = capsys.readouterr().out
     assert "| box | 8 |" in printed and "| jpeg75 | 12 |" in printed
 
@@ -131,5 +132,6 @@ def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys
 def test_the_shipped_calibration_reads():
     cal = calibration.load()
     assert cal.n >= 60 and cal.source["set"] == "calibration"
+    assert cal.source["seeds"] == "11-18"
     assert len(cal.source["presets"]) == 5 and len(cal.source["channels"]) == 7
     assert cal.p_value(cal.line()) == pytest.approx(calibration.ALPHA, rel=1e-6)
