@@ -135,7 +135,8 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     image : (H, W, 3) the photo, sRGB [0, 1].
     cell_px, n_slices, sigma, cos_evidence, min_totems : see the module constants.
     photo_sigma : the photo's blur (pixels, a number or an (H, W) map,
-        :mod:`verify.resolution`); default the rays' splat, ``sigma * cell_px``.
+        :mod:`verify.resolution`), never less than the rays' splat ``sigma * cell_px``
+        (the default).
 
     Returns
     -------
@@ -150,8 +151,9 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
     sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame, res, n_slices=n_slices,
                        sigma=sigma)
-    blurred = blur_varying(chroma(image),
-                           sigma * cell_px if photo_sigma is None else photo_sigma)
+    splat_px = sigma * cell_px
+    blurred = blur_varying(chroma(image), splat_px if photo_sigma is None
+                           else np.maximum(photo_sigma, splat_px))
     uu, vv = cell_centres(frame, res)
     E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
     return cells_to_pixels(E, frame, (W, H))

@@ -181,9 +181,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     rays = getattr(fit, "rays", None)
     if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)
-        splat_px = corroborate.SIGMA_CELLS * corroborate.CELL_PX
-        errors["CORROB"] = corroborate.corroboration(
-            rays, frame, image, photo_sigma=np.maximum(hue_sigma, splat_px))
+        errors["CORROB"] = corroborate.corroboration(rays, frame, image,
+                                                     photo_sigma=hue_sigma)
         errors["ABSENT"] = absence.absence(rays, frame, image, totem_mask, scene.K,
                                            getattr(fit, "recon_depth", None))
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],

@@ -34,9 +34,8 @@ __all__ = ["SPACING_GAIN", "MIN_SIGMA_PX", "MAX_SIGMA_PX", "LEVELS", "ray_spacin
            "chroma_factor", "photo_sigma", "blur_varying"]
 
 SPACING_GAIN = 1.5
-"""Blur sigma per pixel of ray spacing. The spacing counts every totem's points, while
-the view's detail at a pixel comes from the few totems that see it (chosen on the
-development set between 1 and 1.5)."""
+"""Blur sigma per pixel of ray spacing: the spacing counts every totem's points, while
+the view's detail at a pixel comes from the few totems that see it."""
 
 MIN_SIGMA_PX = 3.0
 """Smallest blur (pixels): the fixed blur of the photo before the spacing was used
