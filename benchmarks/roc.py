@@ -13,7 +13,9 @@ the shipped one: p-value below its alpha), prints:
 - per kind and channel, manipulated photos caught at each line, with interval;
 - per kind, the image-level ROC AUC of the statistic, manipulated photos against every
   untouched one, with a 95 % bootstrap interval (2000 resamples of each class);
-- per kind and channel, the mean patch AP of each judging metric.
+- per kind and channel, the mean patch AP of each judging metric;
+- per kind and preset, the AUC against that preset's untouched photos (where the
+  statistic separates and where the preset's own scores swamp an edit).
 
 ``--plot`` draws the ROC curves per kind. Seconds.
 """
@@ -118,7 +120,23 @@ def tables(rows: list[dict], cal) -> str:
             out.append(f"| {kind} | {ch} | {_rate(_called(r) for r in rs)} "
                        f"| {_rate(r['statistic'] > line for r in rs)} | "
                        f"{auc} | " + " | ".join(aps) + " |")
-    return "\n".join(out)
+    return "\n".join(out + [""] + _by_preset(untouched, edited))
+
+
+def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
+    """Markdown rows: per kind, the AUC within each preset (its untouched photos as
+    negatives), every channel."""
+    presets = sorted({r["preset"] for r in untouched})
+    out = ["| AUC within the preset | " + " | ".join(presets) + " |",
+           "|---|" + "---|" * len(presets)]
+    for kind in sorted({r["kind"] for r in edited}):
+        cells = []
+        for p in presets:
+            neg = [r["statistic"] for r in untouched if r["preset"] == p]
+            pos = [r["statistic"] for r in edited if r["kind"] == kind and r["preset"] == p]
+            cells.append(f"{auc(neg, pos):.2f} ({len(pos)})" if neg and pos else "–")
+        out.append(f"| {kind} | " + " | ".join(cells) + " |")
+    return out
 
 
 def plot(rows: list[dict], path: Path) -> None:

@@ -31,3 +31,17 @@ def test_auc_interval_holds_the_estimate_and_narrows_with_more_photos():
         assert lo <= a <= hi
     assert large[1][1] - large[1][0] < small[1][1] - small[1][0]
     assert 0.70 < large[0] < 0.80          # Phi(1 / sqrt 2) = 0.760
+
+
+def test_auc_within_each_preset_uses_that_presets_untouched_photos():
+    # Pooled, box's high untouched scores hide nothing and envmap's edits look weak;
+    # within each preset the box edit is not separated and the envmap one is.
+    rows = [{"kind": "none", "preset": "box", "statistic": s} for s in (3.0, 4.0)]
+    rows += [{"kind": "none", "preset": "envmap", "statistic": s} for s in (0.1, 0.2)]
+    rows += [{"kind": "color", "preset": "box", "statistic": 3.5},
+             {"kind": "color", "preset": "envmap", "statistic": 1.0}]
+    untouched = [r for r in rows if r["kind"] == "none"]
+    edited = [r for r in rows if r["kind"] != "none"]
+    header, _, color = roc._by_preset(untouched, edited)
+    assert header.split(" | ")[1:] == ["box", "envmap |"]
+    assert color == "| color | 0.50 (1) | 1.00 (1) |"
