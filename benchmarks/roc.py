@@ -133,7 +133,8 @@ def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
         cells = []
         for p in presets:
             neg = [r["statistic"] for r in untouched if r["preset"] == p]
-            pos = [r["statistic"] for r in edited if r["kind"] == kind and r["preset"] == p]
+            pos = [r["statistic"] for r in edited
+                   if r["kind"] == kind and r["preset"] == p]
             cells.append(f"{auc(neg, pos):.2f} ({len(pos)})" if neg and pos else "–")
         out.append(f"| {kind} | " + " | ".join(cells) + " |")
     return out
