@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.errors import BadInput
-from verify.resolution import blur_varying
+from verify.resolution import MIN_SIGMA_PX, blur_varying
 
 __all__ = ["GRID", "PATCH_PX", "MIN_PATCH_PX", "NERF_L1_SCALE", "MANIP_FRACTION",
            "CHROMA_RADIUS_PX", "TOP_FRACTION", "POOLED_BY_WORST", "CHROMA_BLUR_PX",
@@ -98,7 +98,7 @@ POOLED_BY_WORST = ("CHROMA", "CORROB", "UNSEEN", "ABSENT")
 """Metrics whose patch score is :func:`patch_top_means`; the others (L1 and SSIM as the
 NeRF path writes them, RANGE) are patch means."""
 
-CHROMA_BLUR_PX = 3.0
+CHROMA_BLUR_PX = MIN_SIGMA_PX
 """Gaussian sigma (pixels) applied to the photo first when no map of the rays' spacing is
 given (:mod:`verify.resolution` gives one per pixel, at least this): the reconstruction
 has no detail finer than its totem rays' spacing (about 3 px at 640x480), so neither

@@ -38,7 +38,7 @@ SPACING_GAIN = 1.5
 the view's detail at a pixel comes from the few totems that see it."""
 
 MIN_SIGMA_PX = 3.0
-"""Smallest blur (pixels): the fixed blur of the photo before the spacing was used
+"""Smallest blur (pixels), and the photo's one blur where no spacing is given
 (:data:`verify.patches.CHROMA_BLUR_PX`)."""
 
 MAX_SIGMA_PX = 22.5
