@@ -46,7 +46,7 @@ from scenes import backend, folder
 from scenes.colour import linear_to_srgb, linear_to_srgb_dr, srgb_to_linear
 from scenes.errors import BadInput
 
-__all__ = ["FitSettings", "FitResult", "fit_scene"]
+__all__ = ["FitSettings", "FitResult", "fit_scene", "ray_batches"]
 
 
 @dataclass
@@ -77,7 +77,9 @@ class FitSettings:
     near_factor: float = 0.5
     far_factor: float = 1000.0       # far plane: effectively at infinity
     render_samples: int = 128
-    seed: int = 0
+    seed: int = 0                    # the ray batches' order
+    batch_rays: int = 4096           # totem rays per step (0: all of them)
+    lr_decay: float = 0.1            # the last stage's rates fall to this fraction
     lr_ambient: float = 0.002
     stereo: bool = True              # keep stereo's geometry where held-out totems say so
     stereo_res: tuple = (120, 160)   # (rows, columns) of the stereo depth maps
@@ -274,15 +276,11 @@ def _usable_pixels(itg, frame, pixels: TotemPixels, initial, radius, ior, settin
 def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, settings, *,
               outline, learn_pose: bool, progress: bool) -> _Model:
     """Adam over the stages: grids (and from ``pose_start`` on the centres) and the
-    ambient colour, on photometric + TV + distortion (+ outline) losses."""
-    dr, mi = backend.modules()
-    from inverse.integrator import distortion
-
-    observed = pixels.observed
-    n_rays = len(pixels.u)
-    obs_dr = mi.Color3f(observed[:, 0], observed[:, 1], observed[:, 2])
-    refl_dr = mi.Float(refl.astype(np.float32))
-    ambient = mi.Float(srgb_to_linear(observed).mean(0).astype(np.float32))
+    ambient colour, on photometric + TV + distortion (+ outline) losses, each step on a
+    batch of ``settings.batch_rays`` totem rays (:func:`ray_batches`)."""
+    mi = backend.modules()[1]
+    rays = _DeviceRays.upload(pixels, refl)
+    batches = ray_batches(len(pixels.u), settings.batch_rays, settings.seed)
     stages = [(float(f), int(s)) for f, s in settings.stages]
     total_steps = sum(s for _, s in stages)
     pose_step = int(round(settings.pose_start * total_steps))
@@ -293,9 +291,10 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     step_times, step = [], 0
     density, _ = _initial_grids(settings)
     # The colour starts at the mean observed radiance, the Fresnel loss (~0.9) undone.
-    mean_lin = srgb_to_linear(observed).mean(0) / 0.9
-    colour = np.broadcast_to(mean_lin.astype(np.float32),
+    mean_lin = srgb_to_linear(pixels.observed).mean(0)
+    colour = np.broadcast_to((mean_lin / 0.9).astype(np.float32),
                              tuple(settings.colour_res) + (3,)).copy()
+    ambient = backend.upload(mi.Float, mean_lin)
     centers, pose_on = initial.copy(), False
     bar = _progress_bar(total_steps) if progress else None
     for frac, n_steps in stages:
@@ -303,6 +302,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
         colour = resample(colour, (settings.colour_res[0],)
                           + _stage_res(settings.colour_res[1:], frac))
         itg.setup(frame, density, colour, centers, radius, ior)
+        itg.n_samples = _stage_samples(settings.n_samples, frac)
         params = mi.traverse(itg)
         opt = mi.ad.Adam(lr=settings.lr_density)
         opt["density"] = params["density"]
@@ -313,33 +313,26 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
         params.update(opt)
         tv_d, tv_c = TotalVariation(density.shape), TotalVariation(colour.shape)
         pose_on = False
-        for _ in range(n_steps):
+        last = frac == stages[-1][0]
+        for i in range(n_steps):
             ts = time.perf_counter()
+            if last and settings.lr_decay != 1.0:
+                _decay(opt, settings, settings.lr_decay ** (i / max(1, n_steps - 1)))
             if learn_pose and not pose_on and step >= pose_step:
                 opt["centers"] = params["centers"]
                 opt.set_learning_rate({"centers": settings.lr_pose})
                 params.update(opt)
                 pose_on = True
-            L, valid, w, m, *_ = itg.render_totem_rays(pixels.d_cam, pixels.totem)
-            amb = opt["ambient"]
-            L = L + refl_dr * mi.Color3f(*[
-                dr.gather(mi.Float, amb, i, mode=dr.ReduceMode.Direct) for i in range(3)])
-            pred = mi.Color3f(*[linear_to_srgb_dr(L[i]) for i in range(3)])
-            vmask = dr.select(valid, 1.0, 0.0)
-            diff = pred - obs_dr
-            photo = dr.sum(vmask * (dr.square(diff.x) + dr.square(diff.y)
-                                    + dr.square(diff.z))) / (3.0 * n_rays)
+            batch = rays.batch(next(batches))
+            photo, dist = _photo_terms(itg, batch, opt["ambient"])
             tv = settings.tv_density * tv_d(params["density"]) + \
                 settings.tv_colour * tv_c(params["colour"])
-            dist = dr.sum(vmask * distortion(w, m, itg.n_samples)) / n_rays
             loss = photo + tv + settings.distortion * dist
             pose_l = mi.Float(0.0)
             if pose_on and outline is not None:
                 pose_l = outline(params["centers"])
                 loss = loss + settings.outline * pose_l
-            dr.backward(loss)
-            opt.step()
-            params.update(opt)
+            _backend_step(loss, opt, params)
             for k, x in (("loss", loss), ("photo", photo), ("tv", tv),
                          ("distortion", dist), ("pose", pose_l)):
                 history[k].append(float(x[0]))
@@ -353,12 +346,98 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
                 bar.set_postfix(loss=f"{history['loss'][-1]:.4g}")
         density = np.array(params["density"].numpy())
         colour = np.array(params["colour"].numpy())
-        ambient = mi.Float(np.maximum(np.asarray(opt["ambient"]), 0.0))
+        ambient = backend.upload(mi.Float, np.maximum(np.asarray(opt["ambient"]), 0.0))
         if pose_on:
             centers = itg.center_numpy()
     if bar is not None:
         bar.close()
+    itg.n_samples = settings.n_samples
     return _Model(density, colour, centers, ambient, history, step_times, pose_on)
+
+
+def _backend_step(loss, opt, params) -> None:
+    """Back-propagate ``loss``, take one Adam step and push it into the scene."""
+    dr = backend.modules()[0]
+    dr.backward(loss)
+    opt.step()
+    params.update(opt)
+
+
+@dataclass
+class _DeviceRays:
+    """The totem pixels on the device: directions, totems, observed sRGB, ``R_F``."""
+
+    d: object
+    totem: object
+    observed: object
+    refl: object
+
+    @classmethod
+    def upload(cls, pixels: TotemPixels, refl) -> "_DeviceRays":
+        from inverse.integrator import device_rays
+
+        mi = backend.modules()[1]
+        d, totem = device_rays(pixels.d_cam, pixels.totem)
+        return cls(d, totem, backend.upload(mi.Color3f, pixels.observed),
+                   backend.upload(mi.Float, refl))
+
+    def batch(self, index) -> "_DeviceRays":
+        """The rays at ``index`` (numpy ints), or all of them when None."""
+        if index is None:
+            return self
+        dr, mi = backend.modules()
+        i = backend.upload(mi.UInt32, index, np.uint32)
+        return _DeviceRays(*[dr.gather(type(x), x, i) for x in
+                             (self.d, self.totem, self.observed, self.refl)])
+
+
+def ray_batches(n: int, size: int, seed: int):
+    """Endless batches of ``size`` indices into ``n`` rays (numpy int64), every ray
+    once per epoch in an order drawn from ``seed``; None each step when ``size`` is 0
+    or covers all rays (full batch)."""
+    if size <= 0 or size >= n:
+        while True:
+            yield None
+    rng = np.random.default_rng(seed)
+    queue = np.empty(0, np.int64)
+    while True:
+        if len(queue) < size:
+            queue = np.concatenate([queue, rng.permutation(n)])
+        yield queue[:size]
+        queue = queue[size:]
+
+
+def _photo_terms(itg, rays: _DeviceRays, ambient):
+    """The photometric term (mean squared sRGB error per channel) and the mean
+    distortion of ``rays`` rendered through their totems, with the glass's front
+    reflection ``R_F a`` added (``ambient`` a linear RGB ``mi.Float`` (3,))."""
+    dr, mi = backend.modules()
+    from inverse.integrator import distortion
+
+    n_rays = dr.width(rays.refl)
+    L, valid, w, m, *_ = itg.render_totem_rays(rays.d, rays.totem)
+    L = L + rays.refl * mi.Color3f(*[
+        dr.gather(mi.Float, ambient, i, mode=dr.ReduceMode.Direct) for i in range(3)])
+    pred = mi.Color3f(*[linear_to_srgb_dr(L[i]) for i in range(3)])
+    vmask = dr.select(valid, 1.0, 0.0)
+    diff = pred - rays.observed
+    photo = dr.sum(vmask * (dr.square(diff.x) + dr.square(diff.y)
+                            + dr.square(diff.z))) / (3.0 * n_rays)
+    dist = dr.sum(vmask * distortion(w, m, itg.n_samples)) / n_rays
+    return photo, dist
+
+
+def _stage_samples(n: int, frac: float) -> int:
+    """Samples per ray in a stage: as the depth resolution, ``n`` scaled by the stage's
+    fraction (at least 16)."""
+    return max(16, int(round(n * frac)))
+
+
+def _decay(opt, settings: FitSettings, factor: float) -> None:
+    """Set every learning rate to ``factor`` times its setting."""
+    rates = {"density": settings.lr_density, "colour": settings.lr_colour,
+             "ambient": settings.lr_ambient, "centers": settings.lr_pose}
+    opt.set_learning_rate({k: r * factor for k, r in rates.items() if k in opt.keys()})
 
 
 def _stage_res(res, frac) -> tuple:

@@ -51,7 +51,7 @@ from scenes import backend
 if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
     import mitsuba as mi
 
-__all__ = ["DELTA_SCALE", "softplus", "FrameConstants", "ray_segment",
+__all__ = ["DELTA_SCALE", "softplus", "FrameConstants", "ray_segment", "device_rays",
            "leaves_through_top", "march", "distortion", "select_center", "TotemGrid",
            "integrator_class"]
 
@@ -206,6 +206,16 @@ def distortion(w, m, n: int):
     return dr.block_sum(per_lane, n)
 
 
+def device_rays(d_cam, totem_index):
+    """Pixel directions (m, 3) and totem indices (m,) as ``mi.Vector3f`` and
+    ``mi.UInt32`` (uploaded once: a fit's steps reuse them); Dr.Jit inputs pass."""
+    mi = backend.modules()[1]
+    if isinstance(d_cam, mi.Vector3f):
+        return d_cam, totem_index
+    return (backend.upload(mi.Vector3f, d_cam),
+            backend.upload(mi.UInt32, totem_index, np.uint32))
+
+
 def select_center(centers, index):
     """Per-lane totem centre: ``centers`` (x, y, z mi.Float of width n_totems),
     ``index`` (mi.UInt32 per lane). A select chain, whose adjoint is a plain sum."""
@@ -248,13 +258,13 @@ class TotemGrid:
         (nr', nt', ns', 3), totem centres (n, 3) m, radii (n,) m, IoR (n,)."""
         mi = backend.modules()[1]
         self.fc = FrameConstants(frame)
-        self.density = mi.Texture3f(mi.TensorXf(np.asarray(density, np.float32)))
-        self.colour = mi.Texture3f(mi.TensorXf(np.asarray(colour, np.float32)))
+        self.density = mi.Texture3f(backend.upload(mi.TensorXf, density))
+        self.colour = mi.Texture3f(backend.upload(mi.TensorXf, colour))
         if centers is not None:
             c = np.asarray(centers, dtype=np.float32).reshape(-1, 3)
-            self.centers = mi.Float(np.ascontiguousarray(c.T).ravel())
-            self.radius = mi.Float(np.asarray(radius, np.float32).reshape(-1))
-            self.ior = mi.Float(np.asarray(ior, np.float32).reshape(-1))
+            self.centers = backend.upload(mi.Float, c.T.ravel())
+            self.radius = backend.upload(mi.Float, np.reshape(radius, -1))
+            self.ior = backend.upload(mi.Float, np.reshape(ior, -1))
         return self
 
     def traverse(self, callback):
@@ -291,8 +301,8 @@ class TotemGrid:
         """
         mi = backend.modules()[1]
         n = n or self.n_samples
-        s = mi.Float(np.repeat(np.asarray(s, np.float32), n))
-        t = mi.Float(np.repeat(np.asarray(t, np.float32), n))
+        s = backend.upload(mi.Float, np.repeat(np.asarray(s, np.float32), n))
+        t = backend.upload(mi.Float, np.repeat(np.asarray(t, np.float32), n))
         g0 = mi.Point3f(s, t, 0.0)
         g1 = mi.Point3f(s, t, 1.0)
         return march(self.density, self.colour, g0, g1, n, jitter=jitter)
@@ -300,15 +310,13 @@ class TotemGrid:
     def refract(self, d_cam, totem_index):
         """Camera rays through totem pixels, refracted out of their sphere.
 
-        ``d_cam`` (m, 3) numpy unit camera-frame directions, ``totem_index`` (m,) ints.
-        Returns the exit points (mi.Point3f, metres), exit directions, Fresnel
+        ``d_cam`` (m, 3) numpy unit camera-frame directions, ``totem_index`` (m,) ints
+        (or both already on the device, :func:`device_rays`). Returns the exit points (mi.Point3f, metres), exit directions, Fresnel
         transmittance ``T_F`` and validity per ray (:func:`inverse.sphere.totem_rays`),
         differentiable in the centres.
         """
         dr, mi = backend.modules()
-        d_cam = np.asarray(d_cam, np.float32)
-        d = mi.Vector3f(d_cam[:, 0], d_cam[:, 1], d_cam[:, 2])
-        idx = mi.UInt32(np.asarray(totem_index, np.uint32))
+        d, idx = device_rays(d_cam, totem_index)
         P = select_center(self.center_array(), idx)
         R = dr.gather(mi.Float, self.radius, idx)
         eta = dr.gather(mi.Float, self.ior, idx)

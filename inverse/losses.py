@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from inverse.outline import outline_loss, outline_targets
+from inverse.outline import outline_loss, outline_targets, outline_weights
 from scenes import backend
 
 __all__ = ["TotalVariation", "outline_term"]
@@ -22,8 +22,8 @@ class TotalVariation:
         idx = np.arange(D * Hh * Ww * C).reshape(D, Hh, Ww, C)
         a = [idx[1:].ravel(), idx[:, 1:].ravel(), idx[:, :, 1:].ravel()]
         b = [idx[:-1].ravel(), idx[:, :-1].ravel(), idx[:, :, :-1].ravel()]
-        self.a = [mi.UInt32(x.astype(np.uint32)) for x in a if x.size]
-        self.b = [mi.UInt32(x.astype(np.uint32)) for x in b if x.size]
+        self.a = [backend.upload(mi.UInt32, x, np.uint32) for x in a if x.size]
+        self.b = [backend.upload(mi.UInt32, x, np.uint32) for x in b if x.size]
         self.count = float(max(1, sum(x.size for x in a)))
 
     def __call__(self, tensor):
@@ -49,10 +49,10 @@ def outline_term(masks, K, radius, *, outlines=None):
         rays = np.concatenate([pixel_rays(K, uv[:, 0], uv[:, 1]) for uv in outlines])
         ray_totem = np.concatenate([np.full(len(uv), j, np.int32)
                                     for j, uv in enumerate(outlines)])
-    rays = rays.astype(np.float32)
-    rays_dr = mi.Vector3f(rays[:, 0], rays[:, 1], rays[:, 2])
-    idx_dr = mi.UInt32(ray_totem.astype(np.uint32))
-    R = mi.Float(np.asarray(radius, np.float32))
+    rays_dr = backend.upload(mi.Vector3f, rays)
+    idx_dr = backend.upload(mi.UInt32, ray_totem, np.uint32)
+    R = backend.upload(mi.Float, radius)
+    weights = backend.upload(mi.Float, outline_weights(ray_totem))
     n = len(radius)
     fx = float(K[0, 0])
 
@@ -60,6 +60,6 @@ def outline_term(masks, K, radius, *, outlines=None):
         i = dr.arange(mi.UInt32, n)
         P = mi.Point3f(*[dr.gather(mi.Float, centers_flat, i + a * n,
                                      mode=dr.ReduceMode.Direct) for a in range(3)])
-        return outline_loss(P, R, rays_dr, idx_dr, scale=fx)
+        return outline_loss(P, R, rays_dr, idx_dr, scale=fx, weights=weights)
 
     return term

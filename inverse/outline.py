@@ -28,7 +28,7 @@ from scenes import backend
 if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
     import mitsuba as mi
 
-__all__ = ["outline_targets", "outline_residuals", "outline_loss"]
+__all__ = ["outline_targets", "outline_residuals", "outline_weights", "outline_loss"]
 
 
 def outline_targets(masks, K) -> tuple[np.ndarray, np.ndarray]:
@@ -70,11 +70,11 @@ def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
     """
     dr, mi = backend.modules()
     C = _as_centers(centers)
-    d = rays if isinstance(rays, mi.Vector3f) else \
-        mi.Vector3f(np.asarray(rays, dtype=np.float32).T)
+    d = rays if isinstance(rays, mi.Vector3f) else backend.upload(mi.Vector3f, rays)
     idx = ray_totem if isinstance(ray_totem, mi.UInt32) else \
-        mi.UInt32(np.asarray(ray_totem, dtype=np.uint32))
-    R_all = mi.Float(np.atleast_1d(np.asarray(radius, dtype=np.float32)))
+        backend.upload(mi.UInt32, ray_totem, np.uint32)
+    R_all = radius if isinstance(radius, mi.Float) else \
+        backend.upload(mi.Float, np.atleast_1d(radius))
     R = dr.gather(mi.Float, R_all, idx, mode=dr.ReduceMode.Direct) \
         if dr.width(R_all) > 1 else R_all
 
@@ -85,19 +85,27 @@ def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
     return theta - alpha
 
 
-def outline_loss(centers, radius, rays, ray_totem, *, scale: float = 1.0) -> mi.Float:
-    """Mean over totems of the mean squared tangent-cone residual of their outline rays.
-
-    Differentiable in ``centers`` (see :func:`outline_residuals` for the arguments).
-    ``scale`` multiplies the residuals: 1 gives radians squared, ``fx`` about pixels
-    squared. Returns a mi.Float of width 1.
-    """
-    dr, mi = backend.modules()
+def outline_weights(ray_totem) -> np.ndarray:
+    """Each outline ray's weight in :func:`outline_loss` (m,): every totem weighs the
+    same, its rays equally."""
     tid = np.asarray(ray_totem).astype(np.int64).ravel()
     if tid.size == 0:
         raise ValueError("outline_loss needs at least one outline ray")
     count = np.bincount(tid)
-    present = np.count_nonzero(count)
-    w = 1.0 / (present * count[tid])                  # each totem weighs the same
+    return 1.0 / (np.count_nonzero(count) * count[tid])
+
+
+def outline_loss(centers, radius, rays, ray_totem, *, scale: float = 1.0,
+                 weights=None) -> mi.Float:
+    """Mean over totems of the mean squared tangent-cone residual of their outline rays.
+
+    Differentiable in ``centers`` (see :func:`outline_residuals` for the arguments).
+    ``scale`` multiplies the residuals: 1 gives radians squared, ``fx`` about pixels
+    squared. ``weights``: :func:`outline_weights` already uploaded (a fit's steps
+    reuse them). Returns a mi.Float of width 1.
+    """
+    dr, mi = backend.modules()
+    if weights is None:
+        weights = backend.upload(mi.Float, outline_weights(ray_totem))
     r = outline_residuals(centers, radius, rays, ray_totem) * scale
-    return dr.sum(mi.Float(w.astype(np.float32)) * dr.square(r))
+    return dr.sum(weights * dr.square(r))

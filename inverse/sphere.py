@@ -310,7 +310,7 @@ def _per_totem(x, n: int) -> mi.Float:
         x = np.asarray(x, dtype=np.float32)
         if x.size not in (1, n):
             raise ValueError(f"expected 1 or {n} values (one per totem), got {x.size}")
-        x = mi.Float(np.ascontiguousarray(np.broadcast_to(x.ravel(), (n,))))
+        x = backend.upload(mi.Float, np.broadcast_to(x.ravel(), (n,)))
     if dr.width(x) != n:
         raise ValueError(f"expected 1 or {n} values (one per totem), got {dr.width(x)}")
     return x

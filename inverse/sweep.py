@@ -29,6 +29,7 @@ totem sees at each slice (the sweep's first half);
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -75,8 +76,8 @@ def _splat(o, d, colour, totem, frame, z, res, n_tot):
     C = colour.shape[1]
     K = frame.K
     plane = n_tot * nt * ns
-    wsum = np.zeros((nk, plane))
-    csum = np.zeros((nk, C, plane))
+    wsum = np.zeros((nk, plane), np.float32)
+    csum = np.zeros((nk, C, plane), np.float32)
     du = frame.u_range[1] - frame.u_range[0]
     dv = frame.v_range[1] - frame.v_range[0]
     dz = np.where(np.abs(d[:, 2]) > 1e-6, d[:, 2], 1e-6)
@@ -185,6 +186,23 @@ class SliceColours:
     z: np.ndarray
     peak: float
 
+    @cached_property
+    def consistency(self):
+        """Per slice and cell: the landing totems' count ``n_land`` (nk, nt, ns), their
+        mean colour (nk, nt, ns, C) and the variance of their colours (nk, nt, ns),
+        summed over channels; computed once, shared by every sweep of these colours."""
+        n_land = self.land.sum(0)
+        s1 = np.zeros(self.colour.shape[1:], np.float32)
+        s2 = np.zeros(self.land.shape[1:], np.float32)
+        for mu, land in zip(self.colour, self.land):      # totems, not cells
+            mu = np.where(land[..., None], mu, 0.0)
+            s1 += mu
+            s2 += np.einsum("...c,...c->...", mu, mu)
+        count = np.maximum(n_land, 1).astype(np.float32)
+        mean = s1 / count[..., None]
+        var = np.maximum(s2 / count - np.einsum("...c,...c->...", mean, mean), 0.0)
+        return n_land, mean, var
+
 
 def slice_colours(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int = 64,
                   sigma: float | None = 1.5, min_weight: float = 0.3) -> SliceColours:
@@ -210,8 +228,10 @@ def slice_colours(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: in
                   else 1e-3, 1e-3)
         sigma = float(np.clip(np.sqrt(4.0 / (np.pi * rho)), 0.5, 4.0))
     ax = (0, 0, sigma, sigma)
-    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant", truncate=2.5)
-    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant", truncate=2.5)
+    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant",
+                                   truncate=2.5)
+    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant",
+                                   truncate=2.5)
     peak = 1.0 / (2 * np.pi * sigma ** 2)
     land = wsum > min_weight * peak
     mu = csum / np.maximum(wsum, 1e-12)[..., None]
@@ -255,11 +275,8 @@ def plane_sweep(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: int 
     sc = colours if colours is not None else slice_colours(
         o, d, colour, totem, frame, res, n_slices=n_slices, sigma=sigma,
         min_weight=min_weight)
-    wsum, land, mu, z, peak = sc.weight, sc.land, sc.colour, sc.z, sc.peak
-    n_land = land.sum(0)                                         # (nk, nt, ns)
-    lw = land.astype(np.float64)
-    mean = (lw[..., None] * mu).sum(0) / np.maximum(n_land, 1)[..., None]
-    var = (lw * np.square(mu - mean[None]).sum(-1)).sum(0) / np.maximum(n_land, 1)
+    wsum, z, peak = sc.weight, sc.z, sc.peak
+    n_land, mean, var = sc.consistency                           # (nk, nt, ns)
     defined = n_land >= 2
     fill = float(np.median(var[defined])) if defined.any() else 1.0
     cost = np.where(defined, var, fill) / max(fill, 1e-12)

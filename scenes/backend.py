@@ -17,11 +17,14 @@ chosen.
 
 from __future__ import annotations
 
-__all__ = ["use", "modules", "describe", "BackendError"]
+__all__ = ["use", "modules", "describe", "upload", "aligned", "single_thread_blas",
+           "BackendError"]
 
 import glob
 import os
 import sys
+
+import numpy as np
 
 KNOWN_BAD_LLVM = (15, 16)
 
@@ -110,8 +113,23 @@ def use(variant: str | None = None) -> str:
     threads = os.environ.get("TOTEMS_THREADS")
     if threads:
         dr.set_thread_count(int(threads))
+    single_thread_blas()
     _variant = variant
     return variant
+
+
+def single_thread_blas() -> None:
+    """Keep numpy's BLAS on one thread for the rest of the process.
+
+    The fit's numpy work makes many tiny LAPACK calls (the view's Delaunay
+    interpolation); a threaded OpenBLAS wakes its spinning threads for each, which
+    beside Dr.Jit's own threads or another check made the stereo stage five times
+    slower (docs/decisions.md, "A check in seconds").
+    """
+    import scipy.linalg  # noqa: F401  (scipy ships its own OpenBLAS: load it first)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def modules():
@@ -133,3 +151,28 @@ def describe() -> dict:
     if info["variant"].startswith("llvm"):
         info["llvm"] = ".".join(map(str, dr.detail.llvm_version()))
     return info
+
+
+def aligned(array, dtype=np.float32) -> np.ndarray:
+    """A C-contiguous copy of ``array`` as ``dtype`` whose buffer starts on 64 bytes.
+
+    Dr.Jit's LLVM backend maps a contiguous numpy array without copying it and compiles
+    each load as aligned or not by where the buffer happens to start. That enters the
+    kernel's hash, so the same kernel fed a buffer of the other alignment misses the
+    kernel cache and is compiled again (about 0.1 s a kernel).
+    """
+    a = np.asarray(array, dtype=dtype)
+    buf = np.empty(a.nbytes + 64, np.uint8)
+    start = (-buf.ctypes.data) % 64
+    out = buf[start:start + a.nbytes].view(a.dtype).reshape(a.shape)
+    out[...] = a
+    return out
+
+
+def upload(cls, array, dtype=np.float32):
+    """``cls(array)``, a Dr.Jit array or tensor, from an :func:`aligned` copy of the
+    numpy ``array``; for a 3-vector type ``array`` is (m, 3), one row a lane."""
+    a = np.asarray(array)
+    if a.ndim == 2 and a.shape[1] == 3 and cls.__name__.endswith("3f"):
+        return cls(*[aligned(a[:, i], dtype) for i in range(3)])
+    return cls(aligned(a, dtype))
