@@ -55,3 +55,55 @@ def test_use_is_idempotent():
     assert backend.use() == first
     dr, mi = backend.modules()
     assert mi.variant() == first
+
+
+def test_aligned_copies_start_on_64_bytes_and_keep_their_values():
+    import numpy as np
+    from scenes import backend
+
+    buf = np.arange(1001, dtype=np.float64)
+    for start in range(4):                    # numpy views of every alignment
+        a = backend.aligned(buf[start:start + 997])
+        assert a.ctypes.data % 64 == 0 and a.dtype == np.float32
+        assert np.array_equal(a, buf[start:start + 997].astype(np.float32))
+    rows = np.arange(30, dtype=np.float32).reshape(10, 3)
+    _, mi = backend.modules()
+    v = backend.upload(mi.Vector3f, rows)
+    assert np.array_equal(np.asarray(v).T, rows)
+
+
+def test_uploads_of_differently_aligned_arrays_reuse_one_kernel():
+    """A mapped numpy buffer's alignment enters the kernel's hash: aligned uploads keep
+    it the same, so the second call finds the kernel compiled for the first."""
+    import numpy as np
+    from scenes import backend
+
+    dr, mi = backend.modules()
+    buf = backend.aligned(np.random.default_rng(0).random(40_064))
+    odd, even = buf[1:40_001], buf[16:40_016]       # 4 bytes past 64, and on 64
+    fresh = float(np.random.default_rng().random())        # a kernel no cache holds yet
+
+    def run(x):
+        y = dr.exp(dr.sin(x * 1.25) * fresh) + 0.1137
+        dr.eval(y)
+        return [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        first = run(backend.upload(mi.Float, odd))
+        second = run(backend.upload(mi.Float, even))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert first and second
+    assert all(k["cache_hit"] for k in second)
+
+
+def test_numpy_blas_runs_on_one_thread_once_the_backend_is_chosen():
+    from threadpoolctl import threadpool_info
+
+    from scenes import backend
+
+    backend.use()
+    blas = [i for i in threadpool_info() if i["user_api"] == "blas"]
+    assert blas and all(i["num_threads"] == 1 for i in blas)

@@ -336,3 +336,70 @@ def test_rays_leaving_through_the_top_face_are_told_apart():
     assert g1r[1] == pytest.approx(1.0, abs=1e-4)                       # far plane
     assert g1y[2] == pytest.approx(1.0, abs=1e-4)                       # bottom face
     assert np.asarray(leaves_through_top(g1)).tolist() == [True, False, False]
+
+
+def test_ray_batches_cover_every_ray_once_an_epoch_in_a_seeded_order():
+    from inverse.fit import ray_batches
+
+    n, size = 1000, 300
+    gen = ray_batches(n, size, seed=3)
+    drawn = np.concatenate([next(gen) for _ in range(10)])         # 3000 = 3 epochs
+    assert all(len(b) == size for b in np.split(drawn, 10))
+    for epoch in np.split(drawn, 3):
+        assert np.array_equal(np.sort(epoch), np.arange(n))
+    again = ray_batches(n, size, seed=3)
+    assert np.array_equal(np.concatenate([next(again) for _ in range(10)]), drawn)
+    other = ray_batches(n, size, seed=4)
+    assert not np.array_equal(next(other), drawn[:size])
+    assert next(ray_batches(n, 0, seed=3)) is None               # full batch
+    assert next(ray_batches(n, n + 5, seed=3)) is None
+
+
+def test_a_batch_holding_every_ray_gives_the_full_photometric_term():
+    from inverse import fit
+    from inverse.rays import TotemPixels
+
+    itg, frame, _, _ = _integrator()
+    d0, j0 = _sphere_pixels(0, 2)
+    d1, j1 = _sphere_pixels(1, 2)
+    d, j = np.concatenate([d0, d1]), np.concatenate([j0, j1])
+    rng = np.random.default_rng(1)
+    observed = rng.random((len(j), 3)).astype(np.float32)
+    pixels = TotemPixels(u=np.zeros(len(j), int), v=np.zeros(len(j), int), d_cam=d,
+                         totem=j, observed=observed)
+    rays = fit._DeviceRays.upload(pixels, np.full(len(j), 0.04))
+    ambient = mi.Float([0.1, 0.2, 0.3])
+    photo, dist = fit._photo_terms(itg, rays, ambient)
+    shuffled = rays.batch(rng.permutation(len(j)))
+    photo_b, dist_b = fit._photo_terms(itg, shuffled, ambient)
+    assert float(photo[0]) > 0
+    assert abs(float(photo_b[0]) - float(photo[0])) <= 1e-5 * float(photo[0])
+    assert abs(float(dist_b[0]) - float(dist[0])) <= 1e-5 * abs(float(dist[0])) + 1e-9
+    half = rays.batch(np.arange(len(j) // 2))
+    assert dr.width(half.refl) == len(j) // 2
+
+
+@pytest.mark.slow
+def test_a_batched_fit_recovers_the_pose_and_the_view_as_the_full_batch_one(small_scene):
+    from inverse import fit
+
+    scene, truth = small_scene
+    init = truth.copy()
+    init[1] += np.array([0.012, -0.008, 0.0])
+    scene = dataclasses.replace(scene, initial_pose=init)
+    st = fit.FitSettings(density_res=(16, 24, 32), colour_res=(1, 30, 40),
+                         stages=((0.5, 40), (1.0, 60)), n_samples=32, lr_pose=1e-3,
+                         pose_start=0.3, render_samples=32, stereo=False)
+    full = fit.fit_scene(scene, settings=dataclasses.replace(st, batch_rays=0))
+    n_rays = full.timings["n_rays"]
+    batched = fit.fit_scene(scene, settings=dataclasses.replace(st, batch_rays=n_rays // 4))
+    err0 = np.abs(init[1] - truth[1]).sum()
+    for r in (full, batched):
+        path = np.asarray(r.history["centers"])
+        assert np.abs(path[-1] - truth).sum(1)[1] < 0.8 * err0
+    # The view and the totem pixels come out as well as with every ray at each step.
+    m = scene.masks.any(0) & (batched.totem_pred.sum(2) > 0)
+    e_full = np.abs(full.totem_pred[m] - scene.image[m]).mean()
+    e_batch = np.abs(batched.totem_pred[m] - scene.image[m]).mean()
+    assert e_batch < 1.2 * e_full
+    assert np.abs(batched.recon - full.recon).mean() < 0.03

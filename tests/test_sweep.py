@@ -64,3 +64,22 @@ def test_semi_global_matching_recovers_a_piecewise_constant_label_from_noise():
     assert np.mean(agg == labels) > 0.95
     # The aggregation keeps the edge: columns next to it on either side are right.
     assert np.mean(agg[:, 18] == 4) > 0.9 and np.mean(agg[:, 21] == 11) > 0.9
+
+
+def test_the_shared_consistency_is_the_landing_totems_mean_and_variance():
+    from inverse.sweep import SliceColours
+
+    rng = np.random.default_rng(2)
+    n_tot, nk, nt, ns = 4, 5, 6, 7
+    colour = rng.random((n_tot, nk, nt, ns, 3)).astype(np.float32)
+    land = rng.random((n_tot, nk, nt, ns)) < 0.6
+    sc = SliceColours(colour, land, np.ones_like(land, float), np.arange(nk), 1.0)
+    n_land, mean, var = sc.consistency
+    assert sc.consistency[0] is n_land                       # computed once
+    for k, i, j in [(0, 0, 0), (2, 3, 4), (4, 5, 6), (1, 2, 3)]:
+        c = colour[land[:, k, i, j], k, i, j].astype(np.float64)
+        assert n_land[k, i, j] == len(c)
+        if len(c):
+            assert np.allclose(mean[k, i, j], c.mean(0), atol=1e-6)
+            assert np.isclose(var[k, i, j], ((c - c.mean(0)) ** 2).sum(1).mean(),
+                              atol=1e-6)
