@@ -345,7 +345,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
                 bar.update(1)
                 bar.set_postfix(loss=f"{history['loss'][-1]:.4g}")
         density = np.array(params["density"].numpy())
-        colour = np.array(params["colour"].numpy())
+        colour = np.array(params["colour"].numpy()).reshape(colour.shape)
         ambient = backend.upload(mi.Float, np.maximum(np.asarray(opt["ambient"]), 0.0))
         if pose_on:
             centers = itg.center_numpy()

@@ -156,7 +156,8 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     Parameters
     ----------
     density, colour : mi.Texture3f
-        Raw density (1 channel) and linear RGB colour (3 channels).
+        Raw density (1 channel) and linear RGB colour (3 channels; a ``mi.Texture2f``
+        over ``(s, t)`` when the colour grid is one slice deep).
     g0, g1 : mi.Point3f
         Segment ends in unit grid coordinates, one value per *lane* (constant within
         each block of ``n`` lanes).
@@ -181,7 +182,8 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     delta = dr.norm(seg) / n
     sigma = softplus(density.eval(p)[0])
     tau = sigma * delta
-    c = mi.Color3f(colour.eval(p))
+    c = mi.Color3f(colour.eval(mi.Point2f(p.x, p.y)) if isinstance(colour, mi.Texture2f)
+                   else colour.eval(p))
     dr.eval(tau, c, m)        # one kernel for the lookups, reused by every reduction
     T = dr.exp(-dr.block_prefix_sum(tau, n, exclusive=True))
     alpha = dr.select(k == n - 1, 1.0, 1.0 - dr.exp(-tau))   # opaque backdrop
@@ -259,7 +261,11 @@ class TotemGrid:
         mi = backend.modules()[1]
         self.fc = FrameConstants(frame)
         self.density = mi.Texture3f(backend.upload(mi.TensorXf, density))
-        self.colour = mi.Texture3f(backend.upload(mi.TensorXf, colour))
+        colour = np.asarray(colour, np.float32)
+        # One slice deep: a 2-D texture, half the lookups of a 3-D one.
+        self.colour = (mi.Texture2f(backend.upload(mi.TensorXf, colour[0]))
+                       if colour.shape[0] == 1 else
+                       mi.Texture3f(backend.upload(mi.TensorXf, colour)))
         if centers is not None:
             c = np.asarray(centers, dtype=np.float32).reshape(-1, 3)
             self.centers = backend.upload(mi.Float, c.T.ravel())

@@ -61,6 +61,7 @@ from inverse.rays import TotemRays
 from inverse.sweep import slice_colours
 from scenes.colour import linear_to_srgb
 from verify import corroborate
+from verify.resolution import gaussian
 from verify.patches import chroma
 
 __all__ = ["SIGMA_PX", "STEP_PX", "MAX_SAMPLES", "BEHIND_SLICES", "MIN_TOTEMS",
@@ -168,7 +169,7 @@ def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *
     if rays.n_totems() < min_totems:
         return np.full((H, W), np.nan)
     colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
-    blurred = ndimage.gaussian_filter(image, (sigma_px, sigma_px, 0))
+    blurred = gaussian(image, sigma_px)
     a = line_absence(o, d, colour, blurred, ~np.asarray(totem_mask, bool), K)
     ok = np.isfinite(a)
     if len(np.unique(totem[ok])) < min_totems:

@@ -20,7 +20,8 @@ verifiable.
 Public
 ------
 ``ray_spacing(points, K, size) -> (H, W)``; ``chroma_factor(jpeg) -> float``;
-``photo_sigma(spacing, factor) -> (H, W)``; ``blur_varying(image, sigma) -> image``.
+``photo_sigma(spacing, factor) -> (H, W)``; ``blur_varying(image, sigma) -> image``;
+``gaussian(image, sigma) -> image``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from scipy import ndimage
 from verify.region import BOX_PX, project_counts
 
 __all__ = ["SPACING_GAIN", "MIN_SIGMA_PX", "MAX_SIGMA_PX", "LEVELS", "ray_spacing",
-           "chroma_factor", "photo_sigma", "blur_varying"]
+           "chroma_factor", "photo_sigma", "blur_varying", "gaussian"]
 
 SPACING_GAIN = 1.5
 """Blur sigma per pixel of ray spacing: the spacing counts every totem's points, while
@@ -84,7 +85,7 @@ def blur_varying(image: np.ndarray, sigma) -> np.ndarray:
     """
     image = np.asarray(image, np.float64)
     if np.ndim(sigma) == 0:
-        return ndimage.gaussian_filter(image, (float(sigma), float(sigma), 0))
+        return gaussian(image, float(sigma))
     levels = np.asarray(LEVELS)
     x = np.interp(np.log(np.clip(sigma, levels[0], levels[-1])), np.log(levels),
                   np.arange(levels.size))
@@ -94,5 +95,20 @@ def blur_varying(image: np.ndarray, sigma) -> np.ndarray:
     for i, s in enumerate(levels):
         w = np.where(i0 == i, 1.0 - t, 0.0) + np.where(i0 + 1 == i, t, 0.0)
         if w.any():
-            out += w[..., None] * ndimage.gaussian_filter(image, (s, s, 0))
+            out += w[..., None] * gaussian(image, s)
     return out
+
+
+def gaussian(image: np.ndarray, sigma: float) -> np.ndarray:
+    """``image`` (H, W, C) blurred by a Gaussian of ``sigma`` pixels across rows and
+    columns, float64, as ``scipy.ndimage.gaussian_filter`` (mirrored edges, 4 sigma)
+    gives it, by OpenCV's separable filter (faster on these sizes)."""
+    import cv2
+
+    image = np.asarray(image, np.float64)
+    if sigma <= 0:
+        return image.copy()
+    r = int(4.0 * sigma + 0.5)
+    out = cv2.GaussianBlur(image, (2 * r + 1, 2 * r + 1), sigma, sigmaY=sigma,
+                           borderType=cv2.BORDER_REFLECT)
+    return out.reshape(image.shape)
