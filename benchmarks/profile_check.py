@@ -1,6 +1,6 @@
 """Where a check's time goes: `totems check` of each SCENE, stage by stage.
 
-    python benchmarks/profile_check.py SCENE [SCENE ...] [--against REV] [--repeat N]
+    python benchmarks/profile_check.py SCENE [SCENE ...] [--against REV] [--no-kernels]
 
 Each photo runs in a fresh process (so its peak memory is its own): the stages of the
 fit and of verify are timed by wrapping the functions that do them (inclusive seconds,
@@ -149,19 +149,26 @@ def _child(args: list[str]) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+_PLAIN = ("import resource, sys\n"
+          "from verify.cli import main\n"
+          "code = main(sys.argv[1:])\n"
+          "kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+          "print(f'peak_kb {kb}', file=sys.stderr)\n"
+          "sys.exit(code)\n")
+
+
 def time_revision(worktree: Path, scene_dir: str, out: str) -> dict:
-    """Wall seconds and peak memory of `totems check` with the code of ``worktree``."""
+    """Wall seconds and peak memory (MB) of `totems check` with the code of
+    ``worktree``, in a process of its own."""
     env = dict(os.environ, PYTHONPATH=str(worktree))
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", "import sys; from verify.cli import main; "
-                          "sys.exit(main(sys.argv[1:]))", "check", scene_dir, "--out", out,
+    res = subprocess.run([sys.executable, "-c", _PLAIN, "check", scene_dir, "--out", out,
                           "--quiet"], cwd=worktree, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - t0
     if res.returncode not in (0, 1):
-        raise SystemExit(f"check at the old revision failed:\n{res.stderr[-2000:]}")
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return {"check_s": seconds, "peak_mb": max(peak, before) / 1024}
+        raise SystemExit(f"check at {worktree} failed:\n{res.stderr[-2000:]}")
+    kb = [ln.split()[1] for ln in res.stderr.splitlines() if ln.startswith("peak_kb ")]
+    return {"check_s": seconds, "peak_mb": int(kb[-1]) / 1024 if kb else float("nan")}
 
 
 def _print_profile(p: dict) -> None:
@@ -201,7 +208,8 @@ def main(argv=None) -> int:
             if worktree is not None:      # both as a user runs them: a process each
                 new = time_revision(ROOT, str(Path(scene).resolve()), str(tmp / f"run{i}"))
                 old = time_revision(worktree, str(Path(scene).resolve()), str(tmp / f"old{i}"))
-                row.update(run_s=new["check_s"], old_s=old["check_s"],
+                row.update(run_s=new["check_s"], run_mb=new["peak_mb"],
+                           old_s=old["check_s"], old_mb=old["peak_mb"],
                            ratio=new["check_s"] / old["check_s"])
             summary.append(row)
     finally:
@@ -209,11 +217,12 @@ def main(argv=None) -> int:
             subprocess.run(["git", "worktree", "remove", "--force", str(worktree)], cwd=ROOT,
                            capture_output=True)
     print("\nscene                 check s   peak MB"
-          + ("   run s   old s  ratio" if worktree else ""))
+          + ("   run s  run MB   old s  old MB  ratio" if worktree else ""))
     for r in summary:
         line = f"{r['scene']:<20}{r['check_s']:9.1f}{r['peak_mb']:10.0f}"
         if "old_s" in r:
-            line += f"{r['run_s']:8.1f}{r['old_s']:8.1f}{r['ratio']:7.2f}"
+            line += (f"{r['run_s']:8.1f}{r['run_mb']:8.0f}{r['old_s']:8.1f}"
+                     f"{r['old_mb']:8.0f}{r['ratio']:7.2f}")
         print(line)
     import statistics
     print(f"median check {statistics.median(r['check_s'] for r in summary):.1f} s")

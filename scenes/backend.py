@@ -119,13 +119,15 @@ def use(variant: str | None = None) -> str:
 
 
 def single_thread_blas() -> None:
-    """Keep numpy's BLAS on one thread for the rest of the process.
+    """Keep every BLAS of the process (numpy's, scipy's, and OpenCV's, loaded later) on
+    one thread.
 
     The fit's numpy work makes many tiny LAPACK calls (the view's Delaunay
     interpolation); a threaded OpenBLAS wakes its spinning threads for each, which
     beside Dr.Jit's own threads or another check made the stereo stage five times
     slower (docs/decisions.md, "A check in seconds").
     """
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")     # those loaded later (cv2's)
     import scipy.linalg  # noqa: F401  (scipy ships its own OpenBLAS: load it first)
     from threadpoolctl import threadpool_limits
 

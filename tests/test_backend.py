@@ -105,5 +105,8 @@ def test_numpy_blas_runs_on_one_thread_once_the_backend_is_chosen():
     from scenes import backend
 
     backend.use()
+    import cv2  # noqa: F401  (its own OpenBLAS, loaded by verify after the fit)
+
     blas = [i for i in threadpool_info() if i["user_api"] == "blas"]
+    assert any("opencv" in i["filepath"] for i in blas)
     assert blas and all(i["num_threads"] == 1 for i in blas)
