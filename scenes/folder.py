@@ -125,6 +125,8 @@ class Scene:
     jpeg : what the photo's file says about its JPEG compression (its quantisation
         tables, the quality they match, its chroma subsampling), read from the file
         alone; None when the photo is not a JPEG.
+    scale : the photo's pixels per pixel of this scene along each axis: 1 as read, more
+        at the working resolution (:mod:`scenes.working`).
     """
 
     path: Path
@@ -136,6 +138,7 @@ class Scene:
     initial_pose: np.ndarray | None = None
     manip_mask: np.ndarray | None = None
     jpeg: JpegInfo | None = None
+    scale: int = 1
 
     @property
     def size(self) -> tuple[int, int]:

@@ -136,3 +136,38 @@ def test_the_totem_rays_judge_the_square_and_a_fit_without_them_still_verifies(
     assert report["metrics"]["patch_ap_CORROB"] is None
     assert not (tmp_path / "b" / "verify" / "CORROB").exists()
     assert report["metrics"]["patch_ap_UNSEEN"] == report["metrics"]["patch_ap_CHROMA"]
+
+
+def _enlarged(src, out, f: int = 5):
+    """A copy of the scene folder ``src`` with every pixel repeated f x f (a photo over
+    the working size: 1600 x 1200 from 320 x 240), K for those pixels."""
+    from scenes.working import scale_intrinsics
+
+    s = folder.read_scene(src)
+    up = np.ones((f, f))
+    big = lambda a: np.kron(a, up[..., None] if np.ndim(a) == 3 else up)  # noqa: E731
+    K = np.linalg.inv(scale_intrinsics(np.eye(3), f)) @ s.K
+    return folder.write_scene(out, image=big(s.image), K=K,
+                              masks=[big(m) > 0 for m in s.masks], radius=s.radius,
+                              ior=s.ior, manip_mask=None if s.manip_mask is None
+                              else big(s.manip_mask) > 0)
+
+
+def test_a_photo_over_the_working_size_is_judged_at_a_fraction_of_it(scene, tampered,
+                                                                       tmp_path):
+    for src, code in ((scene, 0), (tampered, 1)):
+        big = _enlarged(src, tmp_path / f"big-{src.name}")
+        out = tmp_path / f"out-{src.name}"
+        proc = totems("check", big, "--out", out, "--quiet")
+        assert proc.returncode == code, proc.stdout + proc.stderr
+        report = json.loads((out / "verify" / "report.json").read_text())
+        assert report["working_scale"] == 2
+        recon = folder.read_image(out / "verify" / "recon.png")
+        assert recon.shape == (600, 800, 3)
+        assert folder.read_image(big / "image.png").shape == (1200, 1600, 3)   # untouched
+        if code:
+            x0, y0, x1, y1 = (2.5 * np.array(SQUARE)).astype(int)   # at the working size
+            hit = [d for d in report["drivers"]
+                   if d["box"][0] < x1 and d["box"][2] > x0 and d["box"][1] < y1
+                   and d["box"][3] > y0]
+            assert hit, report["drivers"]

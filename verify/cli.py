@@ -95,10 +95,16 @@ def _fit(args, scene):
     return result, fit_dir
 
 
-def cmd_fit(args) -> dict:
+def _read_scene(path):
+    """The scene folder at the working resolution (:mod:`scenes.working`)."""
     from scenes.folder import read_scene
+    from scenes.working import working_scene
 
-    scene = read_scene(args.scene)
+    return working_scene(read_scene(path))
+
+
+def cmd_fit(args) -> dict:
+    scene = _read_scene(args.scene)
     result, fit_dir = _fit(args, scene)
     return {"fit": str(fit_dir), "centers": result.centers.tolist(),
             "initial": result.initial.tolist(), "timing_s": result.timings}
@@ -106,9 +112,11 @@ def cmd_fit(args) -> dict:
 
 def _verify(args, scene, fit, fit_seconds=None) -> dict:
     from scenes.folder import read_truth
+    from scenes.working import working_truth
     from verify.report import verify_scene, write_verify
 
-    report = verify_scene(scene, fit, truth=read_truth(args.scene), region_shape=args.region)
+    report = verify_scene(scene, fit, truth=working_truth(read_truth(args.scene)),
+                          region_shape=args.region)
     if fit_seconds is not None:
         report.timing_s["fit"] = round(fit_seconds, 2)
     out = _out_dir(args) / "verify"
@@ -120,9 +128,8 @@ def _verify(args, scene, fit, fit_seconds=None) -> dict:
 
 def cmd_verify(args) -> dict:
     from scenes.errors import BadInput
-    from scenes.folder import read_scene
 
-    scene = read_scene(args.scene)
+    scene = _read_scene(args.scene)
     from inverse.fit_files import load_fit, scene_fingerprint
     fit_dir = Path(args.fit) if args.fit else _out_dir(args) / "fit"
     if args.fit or (fit_dir / "fit.json").is_file():
@@ -137,13 +144,11 @@ def cmd_verify(args) -> dict:
 
 
 def cmd_check(args) -> dict:
-    from scenes.folder import read_scene
-
     if len(args.scene) > 1 or args.scheduler:      # many photos: verify/checks.py
         from verify.checks import from_args
         return from_args(args)
     args.scene = args.scene[0]
-    scene = read_scene(args.scene)
+    scene = _read_scene(args.scene)
     t0 = time.perf_counter()
     fit, _ = _fit(args, scene)
     return _verify(args, scene, fit, time.perf_counter() - t0)

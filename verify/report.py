@@ -67,6 +67,7 @@ class Report:
     skipped: dict = field(default_factory=dict)
     silhouettes: np.ndarray | None = None
     scene_name: str = ""
+    scale: int = 1
 
     @property
     def drivers(self) -> list:
@@ -77,7 +78,7 @@ class Report:
         threshold and median patch; ``score`` is the largest score / threshold),
         ``statistic``, ``p_value`` and ``line_p_value`` (the calibration's,
         :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
-        protected region's shape) and a
+        protected region's shape), ``working_scale`` (:mod:`scenes.working`) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -98,6 +99,7 @@ class Report:
             "drivers": self.drivers,
             "key_fingerprint": self.key_fingerprint,
             "region": self.region,
+            "working_scale": int(self.scale),
         }
 
 
@@ -237,7 +239,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         timing_s=timing, versions={**_versions(), **(versions or {})},
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
-        scene_name=Path(scene.path).resolve().name)
+        scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1))
 
 
 def _skipped(decision, n_totems: int) -> dict:
