@@ -116,9 +116,11 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.n
     -------
     (nt, ns) float64, sRGB units, NaN where no slice has ``min_totems`` totems.
     """
-    e = np.abs(chroma(mu) - photo_chroma[None, None]).mean(axis=-1)
-    e = np.sort(np.where(land, e, np.inf), axis=0)[min_totems - 1]     # (nk, nt, ns)
-    best = e.min(axis=0)
+    mu = np.asarray(mu, np.float32)                # (totems, slices, cells): float32
+    e = np.abs(mu - mu.mean(axis=-1, keepdims=True)
+               - np.asarray(photo_chroma, np.float32)[None, None]).mean(axis=-1)
+    e = np.partition(np.where(land, e, np.inf), min_totems - 1, axis=0)[min_totems - 1]
+    best = e.min(axis=0).astype(np.float64)                            # (nt, ns)
     return np.where(np.isfinite(best), best, np.nan)
 
 
