@@ -14,7 +14,7 @@ from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_
 
 FIELDS = {"verdict", "score", "threshold", "protected_fraction", "totems", "metrics",
           "timing_s", "versions", "scores", "drivers", "key_fingerprint", "region",
-          "statistic", "p_value", "line_p_value", "skipped"}
+          "statistic", "p_value", "line_p_value", "skipped", "working_scale"}
 
 
 def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():
@@ -54,6 +54,7 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
     path = report.write_verify(rep, tmp_path / "verify")
     data = json.loads(path.read_text())
     assert set(data) == FIELDS
+    assert data["working_scale"] == 1                  # a 320 x 240 photo, as it is
     assert data["verdict"] == "inconsistent"
     assert set(data["metrics"]) == {"patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
                                     "patch_ap_RANGE", "patch_ap_CORROB",
