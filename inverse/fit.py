@@ -12,7 +12,9 @@ and of the recon L1 metric, so dark regions weigh as they will be judged:
          + distortion (Mip-NeRF 360) on each ray's weights: the scene is opaque surfaces
          + pose term: ``inverse.outline.outline_loss`` (tangent cone vs mask outline).
 
-Schedule: coarse to fine (the grid is resampled between stages), Adam (``mi.ad.Adam``);
+Schedule: coarse to fine (the grid is resampled between stages), Adam (``mi.ad.Adam``),
+each step on a seeded batch of the totem rays (:mod:`inverse.batches`), the coarse
+stage with samples in proportion to its depth, the last stage's rates falling;
 the centres are frozen for the first part of the steps, then fitted jointly (unless
 ``fixed_pose`` or ``true_pose``), and kept only if they render the totem pixels better
 than the initial ones with the final grid.
@@ -38,15 +40,16 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from inverse import view
+from inverse.batches import DeviceRays, photo_terms, ray_batches
 from inverse.fit_files import FitResult, fit_timings, scene_fingerprint
 from inverse.grid import FrustumFrame, frame_for_scene, resample
 from inverse.losses import TotalVariation, outline_term
 from inverse.rays import TotemPixels, TotemRays, exit_rays, refracted_rays, totem_pixels
 from scenes import backend, folder
-from scenes.colour import linear_to_srgb, linear_to_srgb_dr, srgb_to_linear
+from scenes.colour import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
 
-__all__ = ["FitSettings", "FitResult", "fit_scene", "ray_batches"]
+__all__ = ["FitSettings", "FitResult", "fit_scene"]
 
 
 @dataclass
@@ -279,7 +282,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     ambient colour, on photometric + TV + distortion (+ outline) losses, each step on a
     batch of ``settings.batch_rays`` totem rays (:func:`ray_batches`)."""
     mi = backend.modules()[1]
-    rays = _DeviceRays.upload(pixels, refl)
+    rays = DeviceRays.upload(pixels, refl)
     batches = ray_batches(len(pixels.u), settings.batch_rays, settings.seed)
     stages = [(float(f), int(s)) for f, s in settings.stages]
     total_steps = sum(s for _, s in stages)
@@ -324,7 +327,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
                 params.update(opt)
                 pose_on = True
             batch = rays.batch(next(batches))
-            photo, dist = _photo_terms(itg, batch, opt["ambient"])
+            photo, dist = photo_terms(itg, batch, opt["ambient"])
             tv = settings.tv_density * tv_d(params["density"]) + \
                 settings.tv_colour * tv_c(params["colour"])
             loss = photo + tv + settings.distortion * dist
@@ -361,70 +364,6 @@ def _backend_step(loss, opt, params) -> None:
     dr.backward(loss)
     opt.step()
     params.update(opt)
-
-
-@dataclass
-class _DeviceRays:
-    """The totem pixels on the device: directions, totems, observed sRGB, ``R_F``."""
-
-    d: object
-    totem: object
-    observed: object
-    refl: object
-
-    @classmethod
-    def upload(cls, pixels: TotemPixels, refl) -> "_DeviceRays":
-        from inverse.integrator import device_rays
-
-        mi = backend.modules()[1]
-        d, totem = device_rays(pixels.d_cam, pixels.totem)
-        return cls(d, totem, backend.upload(mi.Color3f, pixels.observed),
-                   backend.upload(mi.Float, refl))
-
-    def batch(self, index) -> "_DeviceRays":
-        """The rays at ``index`` (numpy ints), or all of them when None."""
-        if index is None:
-            return self
-        dr, mi = backend.modules()
-        i = backend.upload(mi.UInt32, index, np.uint32)
-        return _DeviceRays(*[dr.gather(type(x), x, i) for x in
-                             (self.d, self.totem, self.observed, self.refl)])
-
-
-def ray_batches(n: int, size: int, seed: int):
-    """Endless batches of ``size`` indices into ``n`` rays (numpy int64), every ray
-    once per epoch in an order drawn from ``seed``; None each step when ``size`` is 0
-    or covers all rays (full batch)."""
-    if size <= 0 or size >= n:
-        while True:
-            yield None
-    rng = np.random.default_rng(seed)
-    queue = np.empty(0, np.int64)
-    while True:
-        if len(queue) < size:
-            queue = np.concatenate([queue, rng.permutation(n)])
-        yield queue[:size]
-        queue = queue[size:]
-
-
-def _photo_terms(itg, rays: _DeviceRays, ambient):
-    """The photometric term (mean squared sRGB error per channel) and the mean
-    distortion of ``rays`` rendered through their totems, with the glass's front
-    reflection ``R_F a`` added (``ambient`` a linear RGB ``mi.Float`` (3,))."""
-    dr, mi = backend.modules()
-    from inverse.integrator import distortion
-
-    n_rays = dr.width(rays.refl)
-    L, valid, w, m, *_ = itg.render_totem_rays(rays.d, rays.totem)
-    L = L + rays.refl * mi.Color3f(*[
-        dr.gather(mi.Float, ambient, i, mode=dr.ReduceMode.Direct) for i in range(3)])
-    pred = mi.Color3f(*[linear_to_srgb_dr(L[i]) for i in range(3)])
-    vmask = dr.select(valid, 1.0, 0.0)
-    diff = pred - rays.observed
-    photo = dr.sum(vmask * (dr.square(diff.x) + dr.square(diff.y)
-                            + dr.square(diff.z))) / (3.0 * n_rays)
-    dist = dr.sum(vmask * distortion(w, m, itg.n_samples)) / n_rays
-    return photo, dist
 
 
 def _stage_samples(n: int, frac: float) -> int:

@@ -19,10 +19,10 @@ import math
 
 import numpy as np
 
-from scenes.folder import Scene, Truth
+from scenes.folder import Scene, Truth, read_scene
 
 __all__ = ["WORKING_PIXELS", "working_factor", "scale_intrinsics", "block_mean",
-           "working_scene", "working_truth"]
+           "working_scene", "working_truth", "read_working_scene"]
 
 WORKING_PIXELS = 1280 * 960
 """The most pixels a photo is fitted and judged at."""
@@ -72,6 +72,11 @@ def working_scene(scene: Scene, max_pixels: int = WORKING_PIXELS) -> Scene:
         scene, image=block_mean(scene.image, f).astype(np.float32),
         K=scale_intrinsics(scene.K, f), masks=masks, manip_mask=manip, jpeg=None,
         scale=f * scene.scale)
+
+
+def read_working_scene(path) -> Scene:
+    """:func:`scenes.folder.read_scene` of ``path``, at the working resolution."""
+    return working_scene(read_scene(path))
 
 
 def working_truth(truth: Truth | None, max_pixels: int = WORKING_PIXELS) -> Truth | None:

@@ -347,7 +347,7 @@ def test_rays_leaving_through_the_top_face_are_told_apart():
 
 
 def test_ray_batches_cover_every_ray_once_an_epoch_in_a_seeded_order():
-    from inverse.fit import ray_batches
+    from inverse.batches import ray_batches
 
     n, size = 1000, 300
     gen = ray_batches(n, size, seed=3)
@@ -364,7 +364,7 @@ def test_ray_batches_cover_every_ray_once_an_epoch_in_a_seeded_order():
 
 
 def test_a_batch_holding_every_ray_gives_the_full_photometric_term():
-    from inverse import fit
+    from inverse.batches import DeviceRays, photo_terms
     from inverse.rays import TotemPixels
 
     itg, frame, _, _ = _integrator()
@@ -375,11 +375,11 @@ def test_a_batch_holding_every_ray_gives_the_full_photometric_term():
     observed = rng.random((len(j), 3)).astype(np.float32)
     pixels = TotemPixels(u=np.zeros(len(j), int), v=np.zeros(len(j), int), d_cam=d,
                          totem=j, observed=observed)
-    rays = fit._DeviceRays.upload(pixels, np.full(len(j), 0.04))
+    rays = DeviceRays.upload(pixels, np.full(len(j), 0.04))
     ambient = mi.Float([0.1, 0.2, 0.3])
-    photo, dist = fit._photo_terms(itg, rays, ambient)
+    photo, dist = photo_terms(itg, rays, ambient)
     shuffled = rays.batch(rng.permutation(len(j)))
-    photo_b, dist_b = fit._photo_terms(itg, shuffled, ambient)
+    photo_b, dist_b = photo_terms(itg, shuffled, ambient)
     assert float(photo[0]) > 0
     assert abs(float(photo_b[0]) - float(photo[0])) <= 1e-5 * float(photo[0])
     assert abs(float(dist_b[0]) - float(dist[0])) <= 1e-5 * abs(float(dist[0])) + 1e-9

@@ -30,7 +30,7 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
-from scenes.working import working_scene
+from scenes.working import read_working_scene
 from verify.batch import Engine
 from verify.patches import METRICS
 from verify.runs import Run, run_all
@@ -99,7 +99,7 @@ def fingerprint(scene: Path) -> str | None:
     from inverse.fit_files import scene_fingerprint
 
     try:
-        return scene_fingerprint(working_scene(folder.read_scene(scene)))
+        return scene_fingerprint(read_working_scene(scene))
     except BadInput:
         return None
 

@@ -95,16 +95,10 @@ def _fit(args, scene):
     return result, fit_dir
 
 
-def _read_scene(path):
-    """The scene folder at the working resolution (:mod:`scenes.working`)."""
-    from scenes.folder import read_scene
-    from scenes.working import working_scene
-
-    return working_scene(read_scene(path))
-
-
 def cmd_fit(args) -> dict:
-    scene = _read_scene(args.scene)
+    from scenes.working import read_working_scene
+
+    scene = read_working_scene(args.scene)
     result, fit_dir = _fit(args, scene)
     return {"fit": str(fit_dir), "centers": result.centers.tolist(),
             "initial": result.initial.tolist(), "timing_s": result.timings}
@@ -128,8 +122,9 @@ def _verify(args, scene, fit, fit_seconds=None) -> dict:
 
 def cmd_verify(args) -> dict:
     from scenes.errors import BadInput
+    from scenes.working import read_working_scene
 
-    scene = _read_scene(args.scene)
+    scene = read_working_scene(args.scene)
     from inverse.fit_files import load_fit, scene_fingerprint
     fit_dir = Path(args.fit) if args.fit else _out_dir(args) / "fit"
     if args.fit or (fit_dir / "fit.json").is_file():
@@ -144,11 +139,13 @@ def cmd_verify(args) -> dict:
 
 
 def cmd_check(args) -> dict:
+    from scenes.working import read_working_scene
+
     if len(args.scene) > 1 or args.scheduler:      # many photos: verify/checks.py
         from verify.checks import from_args
         return from_args(args)
     args.scene = args.scene[0]
-    scene = _read_scene(args.scene)
+    scene = read_working_scene(args.scene)
     t0 = time.perf_counter()
     fit, _ = _fit(args, scene)
     return _verify(args, scene, fit, time.perf_counter() - t0)
