@@ -300,7 +300,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     ambient = backend.upload(mi.Float, mean_lin)
     centers, pose_on = initial.copy(), False
     bar = _progress_bar(total_steps) if progress else None
-    for frac, n_steps in stages:
+    for k, (frac, n_steps) in enumerate(stages):
         density = resample(density, _stage_res(settings.density_res, frac))
         colour = resample(colour, (settings.colour_res[0],)
                           + _stage_res(settings.colour_res[1:], frac))
@@ -316,7 +316,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
         params.update(opt)
         tv_d, tv_c = TotalVariation(density.shape), TotalVariation(colour.shape)
         pose_on = False
-        last = frac == stages[-1][0]
+        last = k == len(stages) - 1
         for i in range(n_steps):
             ts = time.perf_counter()
             if last and settings.lr_decay != 1.0:
