@@ -317,9 +317,10 @@ class TotemGrid:
         """Camera rays through totem pixels, refracted out of their sphere.
 
         ``d_cam`` (m, 3) numpy unit camera-frame directions, ``totem_index`` (m,) ints
-        (or both already on the device, :func:`device_rays`). Returns the exit points (mi.Point3f, metres), exit directions, Fresnel
-        transmittance ``T_F`` and validity per ray (:func:`inverse.sphere.totem_rays`),
-        differentiable in the centres.
+        (or both already on the device, :func:`device_rays`). Returns the exit points
+        (mi.Point3f, metres), exit directions, Fresnel transmittance ``T_F`` and
+        validity per ray (:func:`inverse.sphere.totem_rays`), differentiable in the
+        centres.
         """
         dr, mi = backend.modules()
         d, idx = device_rays(d_cam, totem_index)
