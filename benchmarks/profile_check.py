@@ -163,7 +163,8 @@ def time_revision(worktree: Path, scene_dir: str, out: str) -> dict:
     env = dict(os.environ, PYTHONPATH=str(worktree))
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _PLAIN, "check", scene_dir, "--out", out,
-                          "--quiet"], cwd=worktree, env=env, capture_output=True, text=True)
+                          "--quiet"], cwd=worktree, env=env, capture_output=True,
+                         text=True)
     seconds = time.perf_counter() - t0
     if res.returncode not in (0, 1):
         raise SystemExit(f"check at {worktree} failed:\n{res.stderr[-2000:]}")
@@ -195,8 +196,8 @@ def main(argv=None) -> int:
     worktree = None
     if args.against:
         worktree = tmp / "rev"
-        subprocess.run(["git", "worktree", "add", "--detach", str(worktree), args.against],
-                       cwd=ROOT, check=True, capture_output=True)
+        subprocess.run(["git", "worktree", "add", "--detach", str(worktree),
+                        args.against], cwd=ROOT, check=True, capture_output=True)
     summary = []
     try:
         for i, scene in enumerate(args.scenes):
@@ -206,16 +207,17 @@ def main(argv=None) -> int:
             row = {"scene": Path(scene).name, "check_s": p["check_s"],
                    "peak_mb": p["peak_mb"]}
             if worktree is not None:      # both as a user runs them: a process each
-                new = time_revision(ROOT, str(Path(scene).resolve()), str(tmp / f"run{i}"))
-                old = time_revision(worktree, str(Path(scene).resolve()), str(tmp / f"old{i}"))
+                where = str(Path(scene).resolve())
+                new = time_revision(ROOT, where, str(tmp / f"run{i}"))
+                old = time_revision(worktree, where, str(tmp / f"old{i}"))
                 row.update(run_s=new["check_s"], run_mb=new["peak_mb"],
                            old_s=old["check_s"], old_mb=old["peak_mb"],
                            ratio=new["check_s"] / old["check_s"])
             summary.append(row)
     finally:
         if worktree is not None:
-            subprocess.run(["git", "worktree", "remove", "--force", str(worktree)], cwd=ROOT,
-                           capture_output=True)
+            subprocess.run(["git", "worktree", "remove", "--force", str(worktree)],
+                           cwd=ROOT, capture_output=True)
     print("\nscene                 check s   peak MB"
           + ("   run s  run MB   old s  old MB  ratio" if worktree else ""))
     for r in summary:

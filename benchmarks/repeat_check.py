@@ -66,9 +66,9 @@ def main(argv=None) -> int:
             outs.append(out)
         for other in outs[1:]:
             c = compare(outs[0], other)
-            print(f"{Path(scene).name}: verdicts agree {c['verdicts_agree']}, view pixels "
-                  f"differing {100 * c['pixels_differ']:.3f} % (at most {c['max_levels']} "
-                  f"levels), report fields differing {len(c['fields'])}")
+            print(f"{Path(scene).name}: verdicts agree {c['verdicts_agree']}, view "
+                  f"pixels differing {100 * c['pixels_differ']:.3f} % (at most "
+                  f"{c['max_levels']} levels), report fields differing {len(c['fields'])}")
             for k, v in c["fields"].items():
                 print(f"    {k}: {v if isinstance(v, str) else f'{v:.3g}'}")
     return 0
