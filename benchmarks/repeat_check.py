@@ -68,7 +68,8 @@ def main(argv=None) -> int:
             c = compare(outs[0], other)
             print(f"{Path(scene).name}: verdicts agree {c['verdicts_agree']}, view "
                   f"pixels differing {100 * c['pixels_differ']:.3f} % (at most "
-                  f"{c['max_levels']} levels), report fields differing {len(c['fields'])}")
+                  f"{c['max_levels']} levels), report fields differing "
+                  f"{len(c['fields'])}")
             for k, v in c["fields"].items():
                 print(f"    {k}: {v if isinstance(v, str) else f'{v:.3g}'}")
     return 0
