@@ -125,7 +125,7 @@ def single_thread_blas() -> None:
     The fit's numpy work makes many tiny LAPACK calls (the view's Delaunay
     interpolation); a threaded OpenBLAS wakes its spinning threads for each, which
     beside Dr.Jit's own threads or another check made the stereo stage five times
-    slower (docs/decisions.md, "A check in seconds").
+    slower (docs/decisions.md, "fit: a check three times faster").
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")     # those loaded later (cv2's)
     import scipy.linalg  # noqa: F401  (scipy ships its own OpenBLAS: load it first)
