@@ -174,7 +174,8 @@ def aligned(array, dtype=np.float32) -> np.ndarray:
 def upload(cls, array, dtype=np.float32):
     """``cls(array)``, a Dr.Jit array or tensor, from an :func:`aligned` copy of the
     numpy ``array``; for a 3-vector type ``array`` is (m, 3), one row a lane."""
+    dr = modules()[0]
     a = np.asarray(array)
-    if a.ndim == 2 and a.shape[1] == 3 and cls.__name__.endswith("3f"):
+    if a.ndim == 2 and a.shape[1] == 3 and dr.size_v(cls) == 3:
         return cls(*[aligned(a[:, i], dtype) for i in range(3)])
     return cls(aligned(a, dtype))
