@@ -21,14 +21,14 @@ import numpy as np
 
 from scenes import camera, textures
 from scenes.errors import BadInput
-from scenes.presets import (
+from scenes.preset_parts import (
     FORMAT,
     GREY_TEXTURES,
     MAX_DEPTH,
-    _affine,
-    _pitch,
-    _yaw,
+    affine,
+    pitch_rotation,
     sphere_outline,
+    yaw_rotation,
 )
 
 __all__ = ["Rig", "rig", "draw_key", "place_totems", "to_camera", "cube", "ball",
@@ -63,7 +63,7 @@ def rig(rng, size, *, fov=(55.0, 70.0), pitch=(8.0, 16.0), roll=3.0,
     t = np.radians(rng.uniform(-roll, roll))
     c, s = np.cos(t), np.sin(t)
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return Rig(K, Rz @ _pitch(rng.uniform(*pitch)), round(f, 4))
+    return Rig(K, Rz @ pitch_rotation(rng.uniform(*pitch)), round(f, 4))
 
 
 def to_camera(R, p) -> np.ndarray:
@@ -167,7 +167,7 @@ def _place(rng, K, size, key, *, rows, depth, rest_on, obstacles, planes, margin
 
 def cube(centre, size, yaw_deg=0.0) -> np.ndarray:
     """Room ``to_world`` of Mitsuba's cube [-1, 1]^3 as a w x h x d box (m) at centre."""
-    return _affine(_yaw(yaw_deg) @ np.diag(np.asarray(size, float) / 2), centre)
+    return affine(yaw_rotation(yaw_deg) @ np.diag(np.asarray(size, float) / 2), centre)
 
 
 def resting_box(rng, name: str, xz, base_y: float, size, yaw_max: float, bank):
@@ -181,19 +181,19 @@ def resting_box(rng, name: str, xz, base_y: float, size, yaw_max: float, bank):
 
 def ball(centre, radius) -> np.ndarray:
     """Room ``to_world`` of the unit sphere as a ball of ``radius`` (m) at centre."""
-    return _affine(np.eye(3) * radius, centre)
+    return affine(np.eye(3) * radius, centre)
 
 
 def cylinder(base, radius, height, yaw_deg=0.0) -> np.ndarray:
     """Room ``to_world`` of Mitsuba's cylinder standing upright on ``base``."""
-    return _affine(_yaw(yaw_deg) @ UP_CYL @ np.diag([radius, radius, height]), base)
+    return affine(yaw_rotation(yaw_deg) @ UP_CYL @ np.diag([radius, radius, height]), base)
 
 
 def solid(objects: list, R, name, kind, local, mat, removable=False) -> dict:
     """Append an object (room ``local`` to_world taken to the camera frame by ``R``)
     with the next id and its own copy of ``mat``, and return it."""
     obj = {"id": len(objects), "name": f"{name}_{len(objects)}", "kind": kind,
-           "to_world": (_affine(R, [0, 0, 0]) @ local).tolist(), "material": dict(mat),
+           "to_world": (affine(R, [0, 0, 0]) @ local).tolist(), "material": dict(mat),
            "removable": bool(removable)}
     objects.append(obj)
     return obj

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
-from scenes.presets import PHOTO_TEXTURES, _affine, _yaw, panel
+from scenes.preset_parts import PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["GROUND", "SCENERY", "describe"]
 
@@ -89,7 +89,7 @@ def _sky(rng, R) -> tuple[dict, dict]:
                    [round(float(c), 4) for c in horizon]],
            "ground": [round(float(c), 4) for c in ground],
            "scale": round(float(rng.uniform(0.8, 1.5)), 3),
-           "to_world": _affine(R @ _yaw(rng.uniform(0, 360)) @ flip, [0, 0, 0]).tolist()}
+           "to_world": affine(R @ yaw_rotation(rng.uniform(0, 360)) @ flip, [0, 0, 0]).tolist()}
     el, az = np.radians(rng.uniform(20, 60)), np.radians(rng.uniform(0, 360))
     to_sun = np.array([np.cos(el) * np.sin(az), -np.sin(el), np.cos(el) * np.cos(az)])
     E, warm = rng.uniform(3.0, 6.0), rng.uniform(0.85, 0.97)

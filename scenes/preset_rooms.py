@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
-from scenes.presets import PHOTO_TEXTURES, _affine, _yaw, panel
+from scenes.preset_parts import PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["FLOORS", "WALLPAPER", "VIEWS", "ALBEDO", "describe"]
 
@@ -39,7 +39,7 @@ def _table(rng, xz, floor_y):
     wood = kit.material(rng, ("wood", "marble", "wood"))
     parts = [("table", "cube", kit.cube((x, floor_y - h + 0.02, z), (w, 0.04, d), yaw),
               wood, False)]
-    Y = _yaw(yaw)
+    Y = yaw_rotation(yaw)
     for sx in (-1, 1):
         for sz in (-1, 1):
             leg = Y @ [sx * (w / 2 - 0.05), 0, sz * (d / 2 - 0.05)]
@@ -80,7 +80,7 @@ def _cabinet(rng, xz, floor_y):
 
 def _armchair(rng, xz, floor_y):
     w, yaw = rng.uniform(0.7, 0.95), rng.uniform(0, 360)
-    Y = _yaw(yaw)
+    Y = yaw_rotation(yaw)
     fabric = kit.material(rng, ("noise", "blobs", "checkerboard"))
     back = Y @ [0, 0, 0.35 * w]
     return 0.7 * w, [
@@ -237,13 +237,13 @@ def _lights(rng, R, window, room) -> list:
     L = rng.uniform(25.0, 45.0)
     sky = kit.paint(rng, (0.0, 0.2), (0.9, 1.0))["rgb"]
     win = {"name": "window", "kind": "rectangle",
-           "to_world": (_affine(R, [0, 0, 0]) @ panel(oc - 0.02 * n, n, down, ww, wh)
+           "to_world": (affine(R, [0, 0, 0]) @ panel(oc - 0.02 * n, n, down, ww, wh)
                         ).tolist(),
            "radiance": [round(L * c, 4) for c in sky], "texture": str(rng.choice(VIEWS))}
     a, b, back, ceil = room[0], room[1], room[2], room[5]
     x, z, s = rng.uniform(-0.5 * a, 0.5 * b), rng.uniform(1.5, back - 1.0), 0.5
     lamp = {"name": "lamp", "kind": "rectangle",
-            "to_world": (_affine(R, [0, 0, 0]) @ panel(
+            "to_world": (affine(R, [0, 0, 0]) @ panel(
                 [x, ceil + 0.01, z], [0, 1, 0], [0, 0, -1], s, s)).tolist(),
             "radiance": [round(rng.uniform(16.0, 32.0), 4)] * 3}
     return [win, lamp]
@@ -255,7 +255,7 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
     ``radius`` (m) and ``ior``, when given, replace the drawn key."""
     rng = np.random.default_rng([int(seed), preset_index])
     rig = kit.rig(rng, size, fov=(62.0, 75.0), pitch=(15.0, 24.0), roll=2.0)
-    R = rig.R @ _yaw(rng.uniform(-20.0, 20.0))      # the room yawed against the camera
+    R = rig.R @ yaw_rotation(rng.uniform(-20.0, 20.0))      # the room yawed against the camera
     height = rng.uniform(1.2, 1.6)
     room = (rng.uniform(1.5, 2.3), rng.uniform(1.5, 2.3), rng.uniform(4.0, 5.5),
             -rng.uniform(0.8, 1.5), height, height - rng.uniform(2.4, 2.8))

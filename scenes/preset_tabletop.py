@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
-from scenes.presets import ENV_PHOTOS, PHOTO_TEXTURES, _affine, _yaw, panel
+from scenes.preset_parts import ENV_PHOTOS, PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["TOPS", "OBJECT_SCALE", "describe"]
 
@@ -88,7 +88,7 @@ def _light(rng, R, top_y) -> dict:
     centre = [rng.uniform(-0.6, 0.6), top_y - rng.uniform(0.9, 1.3),
               rng.uniform(0.0, 1.0)]
     return {"name": "softbox", "kind": "rectangle",
-            "to_world": (_affine(R, [0, 0, 0])
+            "to_world": (affine(R, [0, 0, 0])
                          @ panel(centre, [0, 1, 0], [0, 0, -1], s, s)).tolist(),
             "radiance": [round(L, 4), round(L * warm, 4), round(L * warm ** 2, 4)]}
 
@@ -99,7 +99,7 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
     ``radius`` (m) and ``ior``, when given, replace the drawn key."""
     rng = np.random.default_rng([int(seed), preset_index])
     rig = kit.rig(rng, size, fov=(50.0, 65.0), pitch=(25.0, 38.0), roll=3.0)
-    R = rig.R @ _yaw(rng.uniform(-15.0, 15.0))
+    R = rig.R @ yaw_rotation(rng.uniform(-15.0, 15.0))
     top_y = rng.uniform(0.4, 0.6)
     objects: list = []
     _table(rng, objects, R, top_y, far=rng.uniform(1.6, 2.0))
@@ -108,7 +108,7 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
                          n=(4, 8), gap=0.02)
     env = {"image": str(rng.choice(ENV_PHOTOS)),
            "scale": round(float(rng.uniform(0.4, 0.8)), 3),
-           "to_world": _affine(R @ _yaw(rng.uniform(0, 360)) @ np.diag([-1.0, -1.0, 1.0]),
+           "to_world": affine(R @ yaw_rotation(rng.uniform(0, 360)) @ np.diag([-1.0, -1.0, 1.0]),
                                [0, 0, 0]).tolist()}
     key = kit.draw_key(np.random.default_rng([int(seed), preset_index, 7]), n=(3, 4),
                        radius=(0.06, 0.08), n_totems=n_totems, fixed_radius=radius,

@@ -6,7 +6,7 @@ ones the thresholds were first calibrated on, are drawn here; ``outdoor``
 (:mod:`scenes.preset_outdoor`), ``window`` (:mod:`scenes.preset_rooms`) and
 ``tabletop`` (:mod:`scenes.preset_tabletop`) differ from them in lighting, scale,
 camera (field of view, pitch, roll, an off-centre principal point) and key (radius and
-IoR drawn per totem), and are built from :mod:`scenes.preset_kit`.
+IoR drawn per totem), and are built from :mod:`scenes.preset_kit`; all share :mod:`scenes.preset_parts`.
 
 ``box``
     A closed room like a Cornell box: floor, ceiling and four walls papered with
@@ -37,8 +37,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import camera
+from scenes import camera, preset_outdoor, preset_rooms, preset_tabletop
 from scenes.errors import BadInput
+from scenes.preset_parts import (CAMERA_HEIGHT, ENV_PHOTOS, FLOOR_TEXTURES, FORMAT,
+                                 FOV_X_DEG, GREY_TEXTURES, MAX_DEPTH, PHOTO_TEXTURES,
+                                 PITCH_DEG, TOTEM_IOR, TOTEM_RADIUS, WALL_TEXTURES, affine,
+                                 panel, pitch_rotation, sphere_outline,
+                                 yaw_rotation)
 
 __all__ = ["PRESETS", "FORMAT", "FOV_X_DEG", "PITCH_DEG", "CAMERA_HEIGHT", "MAX_DEPTH",
            "GREY_TEXTURES", "PHOTO_TEXTURES", "WALL_TEXTURES", "FLOOR_TEXTURES",
@@ -46,67 +51,6 @@ __all__ = ["PRESETS", "FORMAT", "FOV_X_DEG", "PITCH_DEG", "CAMERA_HEIGHT", "MAX_
            "place_totems", "describe"]
 
 PRESETS = ("box", "envmap", "outdoor", "window", "tabletop")   # the order seeds rngs
-FORMAT = 1
-FOV_X_DEG = 60.0
-PITCH_DEG = 14.0            # camera looks this much below the horizon
-CAMERA_HEIGHT = 1.0         # metres above the floor
-MAX_DEPTH = 8               # path length: enough for light to pass through the glass
-
-# Textures that scikit-image ships (``skimage.data.<name>``), no download needed.
-# Grey ones are tinted with a random colour; photographs are used as they are.
-GREY_TEXTURES = ("brick", "grass", "gravel", "camera", "moon", "coins", "text",
-                 "checkerboard", "clock", "page")
-PHOTO_TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field",
-                  "immunohistochemistry", "colorwheel", "retina", "cat")
-WALL_TEXTURES = ("brick", "grass", "gravel", "camera", "moon", "coins", "checkerboard",
-                 "text", "hubble_deep_field", "immunohistochemistry", "astronaut")
-FLOOR_TEXTURES = ("gravel", "brick", "grass", "checkerboard", "coins")
-ENV_PHOTOS = ("rocket", "coffee", "chelsea", "astronaut", "cat")
-
-TOTEM_RADIUS = 0.1
-TOTEM_IOR = 1.52
-
-
-# --------------------------------------------------------------------------- frames
-
-def _pitch(deg: float) -> np.ndarray:
-    """Rotation taking room coordinates (y down along gravity, z forward horizontal)
-    to the camera frame of a camera pitched ``deg`` degrees down."""
-    t = np.radians(deg)
-    c, s = np.cos(t), np.sin(t)
-    # camera down = (0, c, -s) and camera forward = (0, s, c) in room coordinates
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _affine(M: np.ndarray, t) -> np.ndarray:
-    A = np.eye(4)
-    A[:3, :3] = M
-    A[:3, 3] = t
-    return A
-
-
-def panel(center, normal, down, width, height) -> np.ndarray:
-    """``to_world`` of Mitsuba's ``rectangle`` ([-1, 1]^2, z = 0, normal +z) as a
-    ``width`` x ``height`` panel whose front faces ``normal``.
-
-    ``down`` is the direction in which the texture's rows go as seen from the front;
-    the texture then reads upright and not mirrored (columns go along
-    ``right = down x forward`` with ``forward = -normal``, as in the OpenCV frame).
-    """
-    n = np.asarray(normal, float)
-    n /= np.linalg.norm(n)
-    d = np.asarray(down, float)
-    d -= n * (d @ n)
-    d /= np.linalg.norm(d)
-    r = np.cross(d, -n)
-    return _affine(np.stack([r * width / 2, d * height / 2, n], axis=1), center)
-
-
-def _yaw(deg: float) -> np.ndarray:
-    """Rotation about the room's vertical axis (y)."""
-    t = np.radians(deg)
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 # --------------------------------------------------------------------------- materials
@@ -158,17 +102,17 @@ def _floor_objects(rng, R: np.ndarray, floor_y: float, *, x_range, z_range, n_ra
         if any(np.hypot(x - px, z - pz) < foot + pf + 0.05 for px, pz, pf in placed):
             continue
         placed.append((x, z, foot))
-        yaw = _yaw(rng.uniform(0.0, 360.0))
+        yaw = yaw_rotation(rng.uniform(0.0, 360.0))
         if kind == "cube":          # Mitsuba cube: [-1, 1]^3
-            local = _affine(yaw @ np.diag([w / 2, h / 2, d / 2]), [x, floor_y - h / 2, z])
+            local = affine(yaw @ np.diag([w / 2, h / 2, d / 2]), [x, floor_y - h / 2, z])
         elif kind == "sphere":      # unit sphere at the origin
-            local = _affine(yaw * rad, [x, floor_y - rad, z])
+            local = affine(yaw * rad, [x, floor_y - rad, z])
         else:                       # Mitsuba cylinder: radius 1 about z, z in [0, 1]
             up = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])   # z -> -y (up)
-            local = _affine(yaw @ up @ np.diag([rad, rad, h]), [x, floor_y, z])
+            local = affine(yaw @ up @ np.diag([rad, rad, h]), [x, floor_y, z])
         objects.append({
             "id": first_id + len(objects), "name": f"{kind}_{len(objects)}", "kind": kind,
-            "to_world": (_affine(R, [0, 0, 0]) @ local).tolist(),
+            "to_world": (affine(R, [0, 0, 0]) @ local).tolist(),
             "material": _object_material(rng, bool(textured[len(objects)])),
             "removable": True})
     return objects
@@ -199,7 +143,7 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
         tile = 1.6                  # metres covered by one copy of a grey texture
         uv = (max(1, round(w / tile)), max(1, round(h / tile))) if tex in GREY_TEXTURES \
             else (1.0, 1.0)
-        to_world = _affine(R, [0, 0, 0]) @ panel(c, n, d, w, h)
+        to_world = affine(R, [0, 0, 0]) @ panel(c, n, d, w, h)
         objects.append({"id": i, "name": name, "kind": "rectangle",
                         "to_world": to_world.tolist(),
                         "material": _texture_material(rng, tex, uv), "removable": False})
@@ -211,7 +155,7 @@ def _room(rng, R: np.ndarray) -> tuple[list, list]:
         w, d = rng.uniform(0.9, 1.3), rng.uniform(0.8, 1.1)
         power = 20.0 / n_lights / (w * d)
         warm = rng.uniform(0.85, 1.0)
-        to_world = _affine(R, [0, 0, 0]) @ panel([x, ceil + 0.01, z], -up, -fwd, w, d)
+        to_world = affine(R, [0, 0, 0]) @ panel([x, ceil + 0.01, z], -up, -fwd, w, d)
         lights.append({"name": f"light_{j}", "kind": "rectangle",
                        "to_world": to_world.tolist(),
                        "radiance": [round(power, 4), round(power * warm, 4),
@@ -223,33 +167,20 @@ def _outdoor(rng, R: np.ndarray) -> tuple[list, dict]:
     """A large textured ground plane (id 0) and an environment map."""
     tex = str(rng.choice(FLOOR_TEXTURES))
     size = 16.0
-    to_world = _affine(R, [0, 0, 0]) @ panel([0, CAMERA_HEIGHT, 4.0], [0, -1, 0],
+    to_world = affine(R, [0, 0, 0]) @ panel([0, CAMERA_HEIGHT, 4.0], [0, -1, 0],
                                               [0, 0, -1], size, size)
     ground = {"id": 0, "name": "ground", "kind": "rectangle", "to_world": to_world.tolist(),
               "material": _texture_material(rng, tex, (8.0, 8.0)), "removable": False}
     # Mitsuba's envmap has +y up; the room's up is -y, pitched into the camera frame.
     flip = np.diag([-1.0, -1.0, 1.0])
-    turn = _yaw(rng.uniform(0.0, 360.0))
+    turn = yaw_rotation(rng.uniform(0.0, 360.0))
     env = {"image": str(rng.choice(ENV_PHOTOS)),
            "scale": round(float(rng.uniform(2.0, 3.0)), 3),
-           "to_world": _affine(R @ turn @ flip, [0, 0, 0]).tolist()}
+           "to_world": affine(R @ turn @ flip, [0, 0, 0]).tolist()}
     return [ground], env
 
 
 # --------------------------------------------------------------------------- totems
-
-def sphere_outline(K: np.ndarray, center, radius: float, n: int = 64) -> np.ndarray:
-    """Pixels (n, 2) of a sphere's silhouette: the projected circle of tangency."""
-    P = np.asarray(center, float)
-    dist2 = P @ P
-    C = P * (1.0 - radius ** 2 / dist2)                # centre of the tangency circle
-    T = radius * np.sqrt(1.0 - radius ** 2 / dist2)    # its radius
-    a = np.cross(P, [0.0, 1.0, 0.0] if abs(P[1]) < 0.9 * np.sqrt(dist2) else [1.0, 0, 0])
-    a /= np.linalg.norm(a)
-    b = np.cross(P / np.sqrt(dist2), a)
-    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)[:, None]
-    return camera.project(K, C + T * (np.cos(t) * a + np.sin(t) * b))
-
 
 def place_totems(rng, K: np.ndarray, size, n: int, radius: float, ior: float,
                  *, margin: float = 0.01) -> list:
@@ -333,7 +264,6 @@ def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = Non
     """
     W, H = _check_args(preset, size, n_totems, radius, ior)
     if preset not in ("box", "envmap"):
-        from scenes import preset_outdoor, preset_rooms, preset_tabletop
         module = {"outdoor": preset_outdoor, "window": preset_rooms,
                   "tabletop": preset_tabletop}[preset]
         return module.describe(seed, (W, H), PRESETS.index(preset), n_totems=n_totems,
@@ -343,7 +273,7 @@ def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = Non
     ior = TOTEM_IOR if ior is None else ior
     rng = np.random.default_rng([int(seed), PRESETS.index(preset)])
     K = camera.intrinsics(W, H, FOV_X_DEG)
-    R = _pitch(PITCH_DEG)
+    R = pitch_rotation(PITCH_DEG)
     if preset == "box":
         objects, lights = _room(rng, R)
         env = None
