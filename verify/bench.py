@@ -30,14 +30,13 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
-from scenes.working import read_working_scene
 from verify.batch import Engine
 from verify.patches import METRICS
-from verify.runs import Run, run_all
+from verify.runs import Run, fingerprint, run_all
 from verify.verdict import THRESHOLDS
 
 __all__ = ["PAPER_TABLE1", "PAPER_TABLE2", "PAPER_TOTEMS", "MODES", "find_scenes",
-           "describe_scene", "modes_for", "fingerprint", "plan", "bench_runs",
+           "describe_scene", "modes_for", "plan", "bench_runs",
            "run_bench", "summarise", "markdown", "CSV_FIELDS", "csv_text",
            "write_outputs", "write_plots"]
 
@@ -92,16 +91,6 @@ def modes_for(info: dict, table1: bool) -> list[str]:
     if table1 and info["kind"] == "none" and info["preset"] != "real":
         return ["joint", "initial", "oracle"]
     return ["joint"]
-
-
-def fingerprint(scene: Path) -> str | None:
-    """The scene's fit fingerprint, or None when it cannot be read (check will say why)."""
-    from inverse.fit_files import scene_fingerprint
-
-    try:
-        return scene_fingerprint(read_working_scene(scene))
-    except BadInput:
-        return None
 
 
 def plan(scenes: list[dict], refit: bool = False) -> list[tuple[dict, dict | None]]:

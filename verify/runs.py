@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Run", "command", "resumed", "run_all"]
+__all__ = ["Run", "command", "fingerprint", "resumed", "run_all"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,19 @@ def _read_json(path: Path):
         return None
 
 
+def fingerprint(scene: Path) -> str | None:
+    """The scene's fit fingerprint at its working resolution, or None when it cannot be
+    read (its own check will say why)."""
+    from inverse.fit_files import scene_fingerprint
+    from scenes.errors import BadInput
+    from scenes.working import read_working_scene
+
+    try:
+        return scene_fingerprint(read_working_scene(scene))
+    except BadInput:
+        return None
+
+
 def resumed(run: Run, argv: list[str], fit_dir: Path, source: str) -> dict | None:
     """The record of ``run`` as an earlier batch finished it, or None to run it."""
     meta = _read_json(run.folder / "run.json")
@@ -64,8 +77,6 @@ def resumed(run: Run, argv: list[str], fit_dir: Path, source: str) -> dict | Non
     fit = _read_json(fit_dir / "fit.json")
     if not isinstance(report, dict) or not isinstance(fit, dict):
         return None
-    from verify.bench import fingerprint
-
     if fit.get("scene_fingerprint") != fingerprint(Path(run.info["scene"])):
         return None
     try:
