@@ -15,14 +15,10 @@ import functools
 import io
 import re
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from verify.findings import Report
 from verify.patches import METRICS
-
-if TYPE_CHECKING:
-    from verify.report import Report
 
 __all__ = ["MAX_SIDE", "METRIC_WORDS", "environment", "data_uri", "png_uri", "unpath",
            "render_report", "render_bench", "markdown_blocks"]
@@ -262,7 +258,7 @@ def _totems(report: Report, data: dict) -> list[dict]:
 
 
 def render_report(report: Report, overlays: dict) -> str:
-    """report.html of a :class:`verify.report.Report`, as text.
+    """report.html of a :class:`verify.findings.Report`, as text.
 
     ``overlays``: {metric: (vmax, (H, W, 3) sRGB heatmap overlay)} as written to
     ``M/heatmap_overlay.png`` (vmax in heatmap.npy units, the colour scale's top).

@@ -10,7 +10,6 @@ silhouettes of ``mask_iou`` and is never written: the report carries only
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ from scenes import folder
 from scenes.errors import BadInput
 from verify import absence, corroborate, html_report, patches, region, resolution
 from verify import verdict as verdict_mod
+from verify.findings import Report
 
 __all__ = ["VIS_FLOOR", "Report", "sphere_silhouette", "mask_iou", "verify_scene",
            "vis_max", "write_verify"]
@@ -32,83 +32,6 @@ The pictures are scaled to the largest kept patch, as the NeRF path scales per i
 but never below this floor, so an untouched photo with a good reconstruction stays in
 the cold colours instead of having its noise stretched to red.
 """
-
-
-@dataclass
-class Report:
-    """Everything ``totems verify`` found; ``to_json`` gives report.json.
-
-    Arrays: ``protected`` (H, W) bool; ``recon``, ``image`` (H, W, 3) sRGB [0, 1];
-    ``totem_mask`` (H, W) bool; ``heatmaps[name]`` (G, G) in heatmap.npy units (see
-    :mod:`verify.patches`); ``keep`` (G, G) patches overlapping the protected region;
-    ``silhouettes`` (n, H, W) bool, each fitted sphere's image (the outlines report.html
-    draws; None when unknown). ``scene_name``: the scene folder's name, for report.html.
-    Neither is in report.json.
-    """
-
-    verdict: str
-    score: float
-    threshold: float
-    protected: np.ndarray
-    protected_fraction: float
-    recon: np.ndarray
-    image: np.ndarray
-    totem_mask: np.ndarray
-    grid: patches.PatchGrid
-    heatmaps: dict
-    keep: np.ndarray
-    decision: verdict_mod.Verdict
-    totems: list
-    metrics: dict
-    key_fingerprint: str
-    region: str = "filled"
-    timing_s: dict = field(default_factory=dict)
-    versions: dict = field(default_factory=dict)
-    skipped: dict = field(default_factory=dict)
-    silhouettes: np.ndarray | None = None
-    scene_name: str = ""
-    scale: int = 1
-
-    @property
-    def drivers(self) -> list:
-        return self.decision.drivers
-
-    def to_json(self) -> dict:
-        """report.json: the contract's fields plus ``scores`` (each metric's own score,
-        threshold and median patch; ``score`` is the largest score / threshold),
-        ``statistic``, ``p_value`` and ``line_p_value`` (the calibration's,
-        :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
-        protected region's shape), ``working_scale`` (:mod:`scenes.working`) and a
-        ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
-        return {
-            "verdict": self.verdict,
-            "score": _num(self.score),
-            "threshold": _num(self.threshold),
-            "protected_fraction": _num(self.protected_fraction),
-            "totems": self.totems,
-            "metrics": {k: _num(v) for k, v in self.metrics.items()},
-            "timing_s": {k: _num(v) for k, v in self.timing_s.items()},
-            "versions": self.versions,
-            "scores": {m: {"score": _num(v), "threshold": _num(self.decision.thresholds[m]),
-                           "median": _num(self.decision.medians[m])}
-                       for m, v in self.decision.scores.items()},
-            "statistic": _num(self.decision.statistic),
-            "p_value": _p(self.decision.p_value),
-            "line_p_value": _p(self.decision.line_p_value),
-            "skipped": self.skipped,
-            "drivers": self.drivers,
-            "key_fingerprint": self.key_fingerprint,
-            "region": self.region,
-            "working_scale": int(self.scale),
-        }
-
-
-def _p(x):
-    return None if x is None else float(f"{x:.4g}")
-
-
-def _num(x):
-    return None if x is None or not np.isfinite(x) else round(float(x), 6)
 
 
 # --------------------------------------------------------------------------- geometry
