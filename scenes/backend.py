@@ -145,10 +145,9 @@ def modules():
 
 
 def describe() -> dict:
-    """Versions of the backend pieces, for reports (``fit.json``, ``report.json``)."""
-    import drjit as dr
-    import mitsuba as mi
-
+    """Versions of the backend pieces, for reports (``fit.json``, ``report.json``) and
+    ``totems --version``; chooses the variant first, so it may be the first Dr.Jit use."""
+    dr, mi = modules()
     info = {"variant": use(), "mitsuba": mi.__version__, "drjit": dr.__version__}
     if info["variant"].startswith("llvm"):
         info["llvm"] = ".".join(map(str, dr.detail.llvm_version()))

@@ -1,5 +1,6 @@
 """The command line: usage and bad input give exit 2 and one line, never a traceback."""
 
+import argparse
 import subprocess
 import sys
 
@@ -108,3 +109,49 @@ def test_a_crash_is_not_a_verdict(monkeypatch, capsys):
     monkeypatch.setattr(cli, "cmd_fit", boom)
     assert cli.main(["fit", "nowhere"]) == cli.EXIT_BUG
     assert "internal error" in capsys.readouterr().err
+
+
+def test_version_names_the_three_versions_and_the_backend():
+    from importlib import metadata
+
+    proc = totems("--version")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    for package in ("totems", "mitsuba", "drjit"):      # read from the installed wheels
+        assert f"{package} {metadata.version(package)}" in lines, proc.stdout
+    backend = [x for x in lines if x.startswith("backend ")]
+    assert len(backend) == 1 and backend[0].split()[1] in ("llvm_ad_rgb", "cuda_ad_rgb")
+
+
+def _parsers(parser, path=()):
+    """(the words after `totems`, parser) of every parser of the command, nested ones
+    included, found in the parser itself so that a new verb is covered."""
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _parsers(sub, path + (name,))
+
+
+def test_every_help_shows_an_example_and_the_exit_codes(capsys):
+    from verify.cli import build_parser
+
+    seen = []
+    for path, parser in _parsers(build_parser()):
+        text = parser.format_help()
+        lines = [x.strip() for x in text.splitlines()]
+        command = " ".join(("totems",) + path)
+        example = lines.index("example:")
+        assert lines[example + 1].startswith(command + " "), (command, text)
+        codes = lines[lines.index("exit codes:") + 1:]
+        assert {"0", "2", "70"} <= {x.split()[0] for x in codes if x[:1].isdigit()}, text
+        seen.append(command)
+    assert {"totems check", "totems scene make", "totems masks", "totems bench"} <= set(seen)
+    by_name = {" ".join(path): parser.format_help() for path, parser in
+               _parsers(build_parser())}
+    assert "1    inconsistent" in by_name["check"] and "3    fewer" in by_name["masks"]
+
+
+def test_help_is_printed_and_exits_0():
+    proc = totems("check", "--help")
+    assert proc.returncode == 0 and "exit codes:" in proc.stdout, proc.stderr

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from verify import arguments
+from verify import arguments, helptext
 
 __all__ = ["main"]
 
@@ -257,13 +257,12 @@ def _fit_arguments(v, many: bool = False) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="totems", description="Physics-based verifier for totem-protected "
-                "photographs: fit the scene seen through glass totems, re-render the "
-                "camera view, find where the photo disagrees.")
+    p = helptext.add_version(_Parser(prog="totems", description=helptext.DESCRIPTION,
+                                     **helptext.usage("totems")))
     sub = p.add_subparsers(dest="verb", required=True, parser_class=_Parser)
 
     def verb(name, func, help_, parent=sub):
-        v = parent.add_parser(name, help=help_, description=help_)
+        v = parent.add_parser(name, help=help_, description=help_, **helptext.usage(name))
         v.set_defaults(func=func)
         v.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
         v.add_argument("--quiet", action="store_true", help="no progress, no summary line")
@@ -277,7 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _scene_verbs(verb, sub) -> None:
     """scene make, tamper, recapture: the verbs that write scene folders."""
-    scene = sub.add_parser("scene", help="synthetic totem-protected scenes")
+    scene = sub.add_parser("scene", help="synthetic totem-protected scenes",
+                           **helptext.usage("scene"))
     scene_sub = scene.add_subparsers(dest="scene_verb", required=True, parser_class=_Parser)
     v = verb("make", cmd_scene_make, "render a synthetic totem-protected scene folder",
              scene_sub)
