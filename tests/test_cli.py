@@ -146,7 +146,8 @@ def test_every_help_shows_an_example_and_the_exit_codes(capsys):
         codes = lines[lines.index("exit codes:") + 1:]
         assert {"0", "2", "70"} <= {x.split()[0] for x in codes if x[:1].isdigit()}, text
         seen.append(command)
-    assert {"totems check", "totems scene make", "totems masks", "totems bench"} <= set(seen)
+    assert {"totems check", "totems scene make", "totems masks",
+            "totems bench"} <= set(seen)
     by_name = {" ".join(path): parser.format_help() for path, parser in
                _parsers(build_parser())}
     assert "1    inconsistent" in by_name["check"] and "3    fewer" in by_name["masks"]

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["DESCRIPTION", "EXAMPLES", "EXIT_CODES", "usage", "add_version", "version_text"]
+__all__ = ["DESCRIPTION", "EXAMPLES", "EXIT_CODES", "usage", "add_version",
+           "version_text"]
 
 DESCRIPTION = ("Physics-based verifier for totem-protected photographs: fit the scene "
                "seen through glass totems, re-render the camera view, find where the "
@@ -61,7 +62,8 @@ def usage(name: str) -> dict:
     """``ArgumentParser`` keywords for parser ``name``: its example and exit codes as
     the epilog, laid out as written here."""
     lines = EXIT_CODES.get(name, "  0    ran\n" + _FAILED).split("\n")
-    coded = sorted((x for x in lines if x[2:3].isdigit()), key=lambda x: int(x.split()[0]))
+    coded = sorted((x for x in lines if x[2:3].isdigit()),
+                   key=lambda x: int(x.split()[0]))
     codes = "\n".join(coded + [x for x in lines if not x[2:3].isdigit()])
     return {"epilog": f"example:\n  {EXAMPLES[name]}\n\nexit codes:\n{codes}",
             "formatter_class": argparse.RawDescriptionHelpFormatter}
