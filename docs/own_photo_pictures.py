@@ -11,7 +11,6 @@ import argparse
 import base64
 import io
 import json
-import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -62,17 +61,16 @@ def report_picture(nb: dict) -> None:
     for cell in nb["cells"]:
         if cell["cell_type"] == "code":
             exec(compile("".join(cell["source"]), "notebook 05", "exec"), env)
-    html = env["work"] / "IMG_0001-out" / "verify" / "report.html"
+    verify = env["work"] / "IMG_0001-out" / "verify"
     with tempfile.TemporaryDirectory() as tmp:
         shot = Path(tmp) / "shot.png"
         subprocess.run(["chromium", "--headless", "--no-sandbox", "--hide-scrollbars",
                         "--window-size=1000,1400", f"--screenshot={shot}",
-                        html.as_uri()], check=True, capture_output=True, timeout=120)
+                        (verify / "report.html").as_uri()],
+                       check=True, capture_output=True, timeout=120)
         _save(shot.read_bytes(), DOCS / "own_photo_report.png")
-        shutil.copy(env["work"] / "IMG_0001-out" / "verify" / "report.json",
-                    Path(tmp) / "report.json")
-        r = json.loads((Path(tmp) / "report.json").read_text())
-        print(f"report: {r['verdict']}, score {r['score']:.2f}, p = {r.get('p_value')}")
+    r = json.loads((verify / "report.json").read_text())
+    print(f"report: {r['verdict']}, score {r['score']:.2f}, p = {r['p_value']}")
 
 
 def main():
