@@ -23,7 +23,7 @@ CAMERA_STREAM = 1          # the camera noise's generator: (sampler seed, this)
 def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
                n_totems: int | None = None, spp: int = 64, radius: float | None = None,
                ior: float | None = None, camera: bool = False,
-               progress: bool = False) -> Path:
+               progress: bool = False, placement: str | None = None) -> Path:
     """Render a random scene of ``preset`` and write its folder at ``out``.
 
     Parameters
@@ -42,6 +42,8 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
         the photo only, ``truth/clean.png`` stays the scene. Off by default, so scenes
         made before it keep their pixels.
     progress : show a progress bar on stderr.
+    placement : how the totems stand (:mod:`scenes.placement`: floating, resting on
+        the floor, ground or table, or on thin stands); None: the preset's.
 
     Returns
     -------
@@ -56,7 +58,7 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise BadInput(f"output folder exists and is not empty: {out}")
     desc = presets.describe(preset, seed, size=size, n_totems=n_totems, radius=radius,
-                            ior=ior)
+                            ior=ior, placement=placement)
     bar = _bar(progress, 3)
     timings = {}
     t0 = time.perf_counter()

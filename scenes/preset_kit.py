@@ -21,6 +21,7 @@ import numpy as np
 
 from scenes import camera, textures
 from scenes.errors import BadInput
+from scenes.placement import check_placement, post_objects, posts_clear
 from scenes.preset_parts import (
     FORMAT,
     GREY_TEXTURES,
@@ -31,8 +32,13 @@ from scenes.preset_parts import (
     yaw_rotation,
 )
 
-__all__ = ["Rig", "rig", "draw_key", "place_totems", "to_camera", "cube", "ball",
+__all__ = ["Rig", "rig", "draw_key", "place_totems", "place_as", "to_camera", "cube", "ball",
            "cylinder", "solid", "bounds", "paint", "material", "scatter", "finish"]
+
+RESTING_ROWS = (0.75, 0.95)
+RESTING_DEPTH = (0.8, 4.5)
+"""Image rows (fractions of the height) and camera depths (m) of totems resting on a
+floor or the ground: wherever the support shows near the bottom of the frame."""
 
 UP_CYL = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])   # cylinder axis z -> up (-y)
 
@@ -112,7 +118,7 @@ def _in_image(K, P, radii, size, margin_px) -> bool:
 
 def place_totems(rng, K, size, key, *, rows=(0.72, 0.86), depth=(1.1, 1.8),
                  rest_on=None, obstacles=(), planes=(), margin=0.01, tries=3000,
-                 at_least=None) -> list:
+                 at_least=None, posts_on=None) -> list:
     """Totem centres (camera frame, m) in a row across the lower image, left to right.
 
     Each totem ``(radius, ior)`` of ``key`` sits at image row fraction ``rows`` and
@@ -120,11 +126,13 @@ def place_totems(rng, K, size, key, *, rows=(0.72, 0.86), depth=(1.1, 1.8),
     normal) of a plane in the camera frame (the normal towards the camera), lying on
     it. Each stays ``margin * W`` pixels inside the frame, the images apart, clear of
     ``obstacles`` (centre, radius) spheres and inside ``planes`` (point, inward
-    normal). When ``tries`` draws find no placement, the key's last totem is dropped
-    while more than ``at_least`` remain (None: never); then BadInput.
+    normal). With ``posts_on`` = a support (point, unit normal up) each totem also
+    needs room for a post down to it (:func:`scenes.placement.posts_clear`). When
+    ``tries`` draws find no placement, the key's last totem is dropped while more than
+    ``at_least`` remain (None: never); then BadInput.
     """
     kw = {"rows": rows, "depth": depth, "rest_on": rest_on, "obstacles": obstacles,
-          "planes": planes, "margin": margin, "tries": tries}
+          "planes": planes, "margin": margin, "tries": tries, "posts_on": posts_on}
     while True:
         try:
             return _place(rng, K, size, key, **kw)
@@ -135,7 +143,7 @@ def place_totems(rng, K, size, key, *, rows=(0.72, 0.86), depth=(1.1, 1.8),
 
 
 def _place(rng, K, size, key, *, rows, depth, rest_on, obstacles, planes, margin,
-           tries) -> list:
+           tries, posts_on) -> list:
     """One attempt of :func:`place_totems` with the whole key."""
     W, H = size
     n = len(key)
@@ -155,12 +163,37 @@ def _place(rng, K, size, key, *, rows, depth, rest_on, obstacles, planes, margin
         if not (np.all(t > 0) and np.all((P[:, 2] >= depth[0]) & (P[:, 2] <= depth[1]))):
             continue
         if _clear(P, radii, obstacles, planes) and \
-                _in_image(K, P, radii, size, margin * W):
+                _in_image(K, P, radii, size, margin * W) and \
+                (posts_on is None or posts_clear(P, radii, posts_on, obstacles)):
             order = np.argsort(P[:, 0] / P[:, 2])
             return [{"center": [round(float(c), 6) for c in P[i]],
                      "radius": float(key[i][0]), "ior": float(key[i][1])} for i in order]
     raise BadInput(f"cannot place {n} totems of radii {list(radii)} m side by side in a "
                    f"{W}x{H} image; use fewer totems or a smaller radius")
+
+
+def place_as(placement, rng, K, size, key, *, support, rows, depth, obstacles=(),
+             planes=(), at_least=None, resting_rows=RESTING_ROWS,
+             resting_depth=RESTING_DEPTH, first_id=0) -> tuple[list, list]:
+    """Totems placed ``placement``-wise (:mod:`scenes.placement`) and the posts under
+    them (objects numbered from ``first_id``; none unless ``stand``).
+
+    ``rows``, ``depth``: the floating placement's (and the stands'); a resting totem
+    lies on ``support`` (point, unit normal up; camera frame) at image rows
+    ``resting_rows`` and camera depths ``resting_depth`` (m), clear of the ``planes``
+    other than the support's own.
+    """
+    check_placement(placement)
+    kw = {"obstacles": obstacles, "at_least": at_least}
+    if placement == "resting":
+        up = np.asarray(support[1], float)
+        walls = [pl for pl in planes if np.asarray(pl[1], float) @ up < 0.99]
+        return place_totems(rng, K, size, key, rows=resting_rows, depth=resting_depth,
+                            rest_on=support, planes=walls, **kw), []
+    stand = support if placement == "stand" else None
+    totems = place_totems(rng, K, size, key, rows=rows, depth=depth, planes=planes,
+                          posts_on=stand, **kw)
+    return totems, post_objects(totems, support, first_id) if stand is not None else []
 
 
 # --------------------------------------------------------------------------- solids

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
+from scenes.placement import support_json
 from scenes.preset_parts import PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["GROUND", "SCENERY", "describe"]
@@ -100,9 +101,10 @@ def _sky(rng, R) -> tuple[dict, dict]:
 
 
 def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
-             ior=None) -> dict:
+             ior=None, placement="floating") -> dict:
     """A random ``outdoor`` scene (format of :mod:`scenes.render`); ``n_totems``,
-    ``radius`` (m) and ``ior``, when given, replace the drawn key."""
+    ``radius`` (m) and ``ior``, when given, replace the drawn key; ``placement``:
+    :mod:`scenes.placement` (resting and stands on the ground)."""
     rng = np.random.default_rng([int(seed), preset_index])
     rig = kit.rig(rng, size, fov=(50.0, 70.0), pitch=(6.0, 12.0), roll=3.0)
     height = rng.uniform(1.3, 1.7)
@@ -115,9 +117,12 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
     env, sun = _sky(rng, rig.R)
     key = kit.draw_key(np.random.default_rng([int(seed), preset_index, 7]),
                        n_totems=n_totems, fixed_radius=radius, fixed_ior=ior)
-    up = kit.to_camera(rig.R, [0, -1, 0])
-    totems = kit.place_totems(
-        np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
-        rows=(0.7, 0.86), depth=(1.2, 2.2), obstacles=[kit.bounds(o) for o in near],
-        planes=[(kit.to_camera(rig.R, [0, height, 0]), up)])
-    return kit.finish("outdoor", seed, size, rig, objects, [sun], env, totems)
+    ground = (kit.to_camera(rig.R, [0, height, 0]), kit.to_camera(rig.R, [0, -1, 0]))
+    totems, posts = kit.place_as(
+        placement, np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
+        support=ground, rows=(0.7, 0.86), depth=(1.2, 2.2),
+        obstacles=[kit.bounds(o) for o in near], planes=[ground], first_id=len(objects),
+        at_least=None if n_totems else 3)
+    objects += posts
+    return kit.finish("outdoor", seed, size, rig, objects, [sun], env, totems,
+                      support=support_json(ground))

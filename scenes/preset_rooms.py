@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
+from scenes.placement import support_json
 from scenes.preset_parts import PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["FLOORS", "WALLPAPER", "VIEWS", "ALBEDO", "describe"]
@@ -250,9 +251,10 @@ def _lights(rng, R, window, room) -> list:
 
 
 def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
-             ior=None) -> dict:
+             ior=None, placement="floating") -> dict:
     """A random ``window`` scene (format of :mod:`scenes.render`); ``n_totems``,
-    ``radius`` (m) and ``ior``, when given, replace the drawn key."""
+    ``radius`` (m) and ``ior``, when given, replace the drawn key; ``placement``:
+    :mod:`scenes.placement` (resting and stands on the floor)."""
     rng = np.random.default_rng([int(seed), preset_index])
     rig = kit.rig(rng, size, fov=(62.0, 75.0), pitch=(15.0, 24.0), roll=2.0)
     R = rig.R @ yaw_rotation(rng.uniform(-20.0, 20.0))      # the room yawed against the camera
@@ -274,11 +276,15 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
     lights = _lights(rng, R, window, room)
     key = kit.draw_key(np.random.default_rng([int(seed), preset_index, 7]),
                        n_totems=n_totems, fixed_radius=radius, fixed_ior=ior)
-    totems = kit.place_totems(
-        np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
-        rows=(0.7, 0.86), depth=(1.1, 1.9), planes=planes,
-        obstacles=[kit.bounds(o) for o in objects if o["kind"] != "rectangle"])
-    return kit.finish("window", seed, size, rig, objects, lights, None, totems)
+    floor = (kit.to_camera(R, [0, height, 0]), kit.to_camera(R, [0, -1, 0]))
+    totems, posts = kit.place_as(
+        placement, np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
+        support=floor, rows=(0.7, 0.86), depth=(1.1, 1.9), planes=planes,
+        obstacles=[kit.bounds(o) for o in objects if o["kind"] != "rectangle"],
+        first_id=len(objects), at_least=None if n_totems else 3)
+    objects += posts
+    return kit.finish("window", seed, size, rig, objects, lights, None, totems,
+                      support=support_json(floor))
 
 
 def _dim(mat: dict) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import preset_kit as kit
+from scenes.placement import support_json
 from scenes.preset_parts import ENV_PHOTOS, PHOTO_TEXTURES, affine, panel, yaw_rotation
 
 __all__ = ["TOPS", "OBJECT_SCALE", "describe"]
@@ -94,9 +95,10 @@ def _light(rng, R, top_y) -> dict:
 
 
 def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
-             ior=None) -> dict:
+             ior=None, placement="resting") -> dict:
     """A random ``tabletop`` scene (format of :mod:`scenes.render`); ``n_totems``,
-    ``radius`` (m) and ``ior``, when given, replace the drawn key."""
+    ``radius`` (m) and ``ior``, when given, replace the drawn key; ``placement``:
+    :mod:`scenes.placement` (resting on the table top by default)."""
     rng = np.random.default_rng([int(seed), preset_index])
     rig = kit.rig(rng, size, fov=(50.0, 65.0), pitch=(25.0, 38.0), roll=3.0)
     R = rig.R @ yaw_rotation(rng.uniform(-15.0, 15.0))
@@ -113,10 +115,12 @@ def describe(seed: int, size, preset_index: int, *, n_totems=None, radius=None,
     key = kit.draw_key(np.random.default_rng([int(seed), preset_index, 7]), n=(3, 4),
                        radius=(0.06, 0.08), n_totems=n_totems, fixed_radius=radius,
                        fixed_ior=ior)
-    up = kit.to_camera(R, [0, -1, 0])
-    totems = kit.place_totems(
-        np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
-        rows=(0.45, 0.9), depth=(0.5, 1.0), rest_on=(kit.to_camera(R, [0, top_y, 0]), up),
-        obstacles=[kit.bounds(o) for o in things], at_least=None if n_totems else 3)
+    top = (kit.to_camera(R, [0, top_y, 0]), kit.to_camera(R, [0, -1, 0]))
+    totems, posts = kit.place_as(
+        placement, np.random.default_rng([int(seed), preset_index, 8]), rig.K, size, key,
+        support=top, rows=(0.4, 0.75), depth=(0.5, 1.0), resting_rows=(0.45, 0.9),
+        resting_depth=(0.5, 1.0), obstacles=[kit.bounds(o) for o in things],
+        planes=[top], at_least=None if n_totems else 3, first_id=len(objects))
+    objects += posts
     return kit.finish("tabletop", seed, size, rig, objects, [_light(rng, R, top_y)], env,
-                      totems, object_scale=OBJECT_SCALE)
+                      totems, object_scale=OBJECT_SCALE, support=support_json(top))

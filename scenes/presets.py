@@ -37,8 +37,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import camera, preset_outdoor, preset_rooms, preset_tabletop
+from scenes import camera, preset_kit, preset_outdoor, preset_rooms, preset_tabletop
 from scenes.errors import BadInput
+from scenes.placement import check_placement, support_json
 from scenes.preset_parts import (CAMERA_HEIGHT, ENV_PHOTOS, FLOOR_TEXTURES, FORMAT,
                                  FOV_X_DEG, GREY_TEXTURES, MAX_DEPTH, PHOTO_TEXTURES,
                                  PITCH_DEG, TOTEM_IOR, TOTEM_RADIUS, WALL_TEXTURES, affine,
@@ -48,9 +49,11 @@ from scenes.preset_parts import (CAMERA_HEIGHT, ENV_PHOTOS, FLOOR_TEXTURES, FORM
 __all__ = ["PRESETS", "FORMAT", "FOV_X_DEG", "PITCH_DEG", "CAMERA_HEIGHT", "MAX_DEPTH",
            "GREY_TEXTURES", "PHOTO_TEXTURES", "WALL_TEXTURES", "FLOOR_TEXTURES",
            "ENV_PHOTOS", "TOTEM_RADIUS", "TOTEM_IOR", "panel", "sphere_outline",
-           "place_totems", "describe"]
+           "place_totems", "describe", "DEFAULT_PLACEMENT"]
 
 PRESETS = ("box", "envmap", "outdoor", "window", "tabletop")   # the order seeds rngs
+DEFAULT_PLACEMENT = {"tabletop": "resting"}
+"""Each preset's placement of its totems when none is asked for; the rest float."""
 
 
 # --------------------------------------------------------------------------- materials
@@ -243,7 +246,8 @@ def _check_args(preset, size, n_totems, radius, ior) -> tuple[int, int]:
 
 
 def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = None,
-             radius: float | None = None, ior: float | None = None) -> dict:
+             radius: float | None = None, ior: float | None = None,
+             placement: str | None = None) -> dict:
     """A random scene of ``preset`` drawn from ``seed``, as a JSON-ready dict.
 
     Parameters
@@ -257,17 +261,23 @@ def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = Non
         ``TOTEM_RADIUS``; the others 0.06-0.12 drawn per totem, tabletop 0.06-0.08).
     ior : totems' index of refraction; None: the preset's (box, envmap:
         ``TOTEM_IOR``; the others 1.45-1.55 drawn per totem).
+    placement : how the totems stand, one of :data:`scenes.placement.PLACEMENTS`;
+        None: the preset's (``DEFAULT_PLACEMENT``: tabletop's rest on the table, the
+        others' float). The description records it as ``placement``.
 
     Returns
     -------
     dict in the format documented in :mod:`scenes.render`.
     """
     W, H = _check_args(preset, size, n_totems, radius, ior)
+    placement = check_placement(DEFAULT_PLACEMENT.get(preset, "floating")
+                                if placement is None else placement)
     if preset not in ("box", "envmap"):
         module = {"outdoor": preset_outdoor, "window": preset_rooms,
                   "tabletop": preset_tabletop}[preset]
-        return module.describe(seed, (W, H), PRESETS.index(preset), n_totems=n_totems,
-                               radius=radius, ior=ior)
+        desc = module.describe(seed, (W, H), PRESETS.index(preset), n_totems=n_totems,
+                               radius=radius, ior=ior, placement=placement)
+        return {**desc, "placement": placement}
     n_totems = 4 if n_totems is None else n_totems
     radius = TOTEM_RADIUS if radius is None else radius
     ior = TOTEM_IOR if ior is None else ior
@@ -284,12 +294,22 @@ def describe(preset: str, seed: int, size=(640, 480), n_totems: int | None = Non
         x_range, z_range = (-1.5, 1.5), (2.4, 5.0)
     objects += _floor_objects(rng, R, CAMERA_HEIGHT, x_range=x_range, z_range=z_range,
                               n_range=(3, 6), first_id=len(objects))
-    for j, light in enumerate(lights):
-        light["id"] = len(objects) + j
     # The totems are drawn from their own stream so that their placement does not
     # change the room and vice versa.
     trng = np.random.default_rng([int(seed), PRESETS.index(preset), 7])
-    totems = place_totems(trng, K, (W, H), int(n_totems), float(radius), float(ior))
+    floor = (R @ [0.0, CAMERA_HEIGHT, 0.0], R @ [0.0, -1.0, 0.0])
+    if placement == "floating":
+        totems = place_totems(trng, K, (W, H), int(n_totems), float(radius), float(ior))
+    else:
+        solids = [o for o in objects if o["kind"] != "rectangle"]
+        totems, posts = preset_kit.place_as(
+            placement, trng, K, (W, H), [(float(radius), float(ior))] * int(n_totems),
+            support=floor, rows=(0.72, 0.84), depth=(1.1, 1.7), first_id=len(objects),
+            obstacles=[preset_kit.bounds(o) for o in solids])
+        objects += posts
+    for j, light in enumerate(lights):
+        light["id"] = len(objects) + j
     return {"format": FORMAT, "preset": preset, "seed": int(seed), "size": [W, H],
             "K": K.tolist(), "fov_x_deg": FOV_X_DEG, "max_depth": MAX_DEPTH,
-            "objects": objects, "lights": lights, "envmap": env, "totems": totems}
+            "objects": objects, "lights": lights, "envmap": env, "totems": totems,
+            "placement": placement, "support": support_json(floor)}

@@ -41,8 +41,14 @@ the world frame: OpenCV, +x right, +y down, +z forward, metres)::
                         "ground": [r, g, b]},            # horizon layout: sRGB 0-1
       "object_scale": float,                        # optional (1): size of the objects
                                                     # a re-rendering edit adds
-      "totems": [ {"center": [x, y, z], "radius": m, "ior": n} ]  # left to right
+      "totems": [ {"center": [x, y, z], "radius": m, "ior": n} ], # left to right
+      "placement": "floating" | "resting" | "stand",  # optional, informational
+      "support": {"point": [x, y, z], "normal": [x, y, z]}  # optional: the plane
+                                 # the totems rest or stand on (normal up), or would
     }
+
+With ``stand`` the posts under the totems are objects (``stand_<id>``, cylinders,
+not removable; :mod:`scenes.placement`).
 
 A texture ``"<name>"`` is a ``skimage.data`` image or a procedural ``"<kind>:<seed>"``
 (:mod:`scenes.textures`). The ``tiled`` envmap is :func:`envmap_image` of the photo, the

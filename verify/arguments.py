@@ -71,6 +71,28 @@ def engine(v) -> None:
                    help="with a tls:// scheduler: this client's private key")
 
 
+def scene_make(v) -> None:
+    """The options of ``totems scene make``."""
+    from scenes.placement import PLACEMENTS
+    from scenes.presets import PRESETS
+
+    v.add_argument("out", help="new scene folder")
+    v.add_argument("--preset", choices=PRESETS, default="box")
+    v.add_argument("--seed", type=int, default=1)
+    v.add_argument("--size", type=size, default=(640, 480), help="WxH (default 640x480)")
+    v.add_argument("--totems", type=positive(int), default=None,
+                   help="number of totems (default: the preset's: box and envmap 4, "
+                        "the others drawn per seed)")
+    v.add_argument("--placement", choices=PLACEMENTS, default=None,
+                   help="how the totems stand: floating, resting on the floor, ground or "
+                        "table, or on thin stands (default: the preset's; tabletop's rest)")
+    v.add_argument("--spp", type=positive(int), default=None,
+                   help="samples per pixel (default: the preset's)")
+    v.add_argument("--camera", action="store_true",
+                   help="a realistic camera: photon and read noise on the linear render, "
+                        "before the sRGB tone curve (off: the render as it is)")
+
+
 def tls(args) -> tuple[str | None, str | None, str | None]:
     """(CA file, certificate, key) of the ``engine`` options."""
     return args.tls_ca_file, args.tls_cert, args.tls_key

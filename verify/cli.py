@@ -41,7 +41,7 @@ def cmd_scene_make(args) -> dict:
     options = {"spp": args.spp} if args.spp else {}
     out = make_scene(args.out, preset=args.preset, seed=args.seed, size=args.size,
                      n_totems=args.totems, camera=args.camera, progress=_progress(args),
-                     **options)
+                     placement=args.placement, **options)
     return {"scene": str(out), "preset": args.preset, "seed": args.seed,
             "seconds": round(time.perf_counter() - t0, 2)}
 
@@ -281,21 +281,7 @@ def _scene_verbs(verb, sub) -> None:
     scene_sub = scene.add_subparsers(dest="scene_verb", required=True, parser_class=_Parser)
     v = verb("make", cmd_scene_make, "render a synthetic totem-protected scene folder",
              scene_sub)
-    v.add_argument("out", help="new scene folder")
-    from scenes.presets import PRESETS
-
-    v.add_argument("--preset", choices=PRESETS, default="box")
-    v.add_argument("--seed", type=int, default=1)
-    v.add_argument("--size", type=arguments.size, default=(640, 480),
-                   help="WxH (default 640x480)")
-    v.add_argument("--totems", type=arguments.positive(int), default=None,
-                   help="number of totems (default: the preset's: box and envmap 4, "
-                        "the others drawn per seed)")
-    v.add_argument("--spp", type=arguments.positive(int), default=None,
-                   help="samples per pixel (default: the preset's)")
-    v.add_argument("--camera", action="store_true",
-                   help="a realistic camera: photon and read noise on the linear render, "
-                        "before the sRGB tone curve (off: the render as it is)")
+    arguments.scene_make(v)
 
     v = verb("tamper", cmd_tamper, "write a manipulated copy of a scene folder")
     v.add_argument("scene")
