@@ -87,10 +87,11 @@ def tasks(photos, out: Path) -> dict:
     (one per folder to write; a photo whose folder exists is done)."""
     todo = {"make": {}, "tamper": {}, "recapture": {}}
     for p in photos:
-        base = sets.Photo(p.preset, p.seed, n_totems=p.n_totems)
+        base = sets.Photo(p.preset, p.seed, n_totems=p.n_totems, placement=p.placement)
         if not (out / base.scene).exists():
             todo["make"][base.scene] = base
-        src = sets.Photo(p.preset, p.seed, p.kind, n_totems=p.n_totems)
+        src = sets.Photo(p.preset, p.seed, p.kind, n_totems=p.n_totems,
+                         placement=p.placement)
         if p.kind != sets.UNTOUCHED and not (out / src.source).exists():
             todo["tamper"][src.source] = src
         if p.channel != "pristine" and not (out / p.name).exists():
@@ -121,7 +122,7 @@ def make_one(out: str, photo, size, spp) -> str:
     t0 = time.perf_counter()
     kw = {} if spp is None else {"spp": spp}
     make_scene(Path(out) / photo.scene, preset=photo.preset, seed=photo.seed, size=size,
-               n_totems=photo.n_totems, **kw)
+               n_totems=photo.n_totems, placement=photo.placement, **kw)
     return f"made {photo.scene} in {time.perf_counter() - t0:.0f} s"
 
 

@@ -14,7 +14,8 @@
 So that no figure is reported on what it was tuned on, a preset's seed belongs to one
 set at most (``RESERVED`` seeds to none): :func:`check_disjoint` refuses an overlap and
 runs when this module is imported. A photo is named ``<preset>-<seed>`` (the untouched
-scene), ``-<n>totems`` for the totems study, ``-<kind>`` when manipulated and
+scene), ``-<n>totems`` for the totems study, ``-resting`` for totems resting on the floor
+or ground (``RESTING``: box, outdoor, window), ``-<kind>`` when manipulated and
 ``+<channel>`` when recaptured (``totems recapture``); the pristine photos keep the
 standard set's names. Channels are :class:`scenes.channel.Channel` settings.
 """
@@ -64,6 +65,7 @@ class Recipe:
         every preset without every photo in every channel).
     presets, seeds : a subset of the set's (None: all).
     n_totems : the number of totems (None: the preset's).
+    placement : how the totems stand (``scenes.placement``; None: the preset's).
     """
     kinds: tuple = (UNTOUCHED,)
     channels: tuple = ("pristine",)
@@ -71,37 +73,51 @@ class Recipe:
     presets: tuple | None = None
     seeds: range | None = None
     n_totems: int | None = None
+    placement: str | None = None
 
+
+RESTING = ("box", "outdoor", "window")
+"""The presets whose totems also rest on the floor or the ground in every set (tabletop's
+always rest; envmap's floor is box's)."""
 
 RECIPES = {
     "development": (Recipe(kinds=(UNTOUCHED,) + KINDS),
-                    Recipe(channels=("jpeg75", "noise2", "resize480"))),
+                    Recipe(channels=("jpeg75", "noise2", "resize480")),
+                    Recipe(kinds=(UNTOUCHED, "color", "splice"), presets=RESTING,
+                           placement="resting")),
     "calibration": (Recipe(),
-                    Recipe(channels=RECAPTURED, rotate=2)),
+                    Recipe(channels=RECAPTURED, rotate=2),
+                    Recipe(presets=RESTING, placement="resting"),
+                    Recipe(channels=RECAPTURED, rotate=1, presets=RESTING,
+                           placement="resting")),
     "benchmark": (Recipe(channels=("pristine", "jpeg75")),
                   Recipe(channels=tuple(c for c in RECAPTURED if c != "jpeg75"), rotate=1),
                   Recipe(kinds=KINDS, channels=("pristine", "jpeg75")),
                   Recipe(presets=("box",), seeds=range(1, 3), n_totems=2),
-                  Recipe(presets=("box",), seeds=range(1, 3), n_totems=6)),
+                  Recipe(presets=("box",), seeds=range(1, 3), n_totems=6),
+                  Recipe(kinds=(UNTOUCHED, "color", "splice"), channels=("pristine", "jpeg75"),
+                         presets=RESTING, placement="resting")),
 }
 SETS = tuple(SEEDS)
 
 
 @dataclass(frozen=True, order=True)
 class Photo:
-    """One photo of a set: the scene (preset, seed, totems), the manipulation, the
-    channel."""
+    """One photo of a set: the scene (preset, seed, totems, their placement), the
+    manipulation, the channel."""
     preset: str
     seed: int
     kind: str = UNTOUCHED
     channel: str = "pristine"
     n_totems: int | None = None
+    placement: str | None = None
 
     @property
     def scene(self) -> str:
         """Folder name of the untouched, pristine scene it is made from."""
         return f"{self.preset}-{self.seed}" + \
-            ("" if self.n_totems is None else f"-{self.n_totems}totems")
+            ("" if self.n_totems is None else f"-{self.n_totems}totems") + \
+            ("" if self.placement is None else f"-{self.placement}")
 
     @property
     def source(self) -> str:
@@ -143,10 +159,10 @@ def photos(name: str) -> list[Photo]:
             channels = r.channels if r.rotate is None else \
                 tuple(r.channels[(i * r.rotate + k) % len(r.channels)]
                       for k in range(r.rotate))
-            out.update(Photo(preset, seed, kind, channel, r.n_totems)
+            out.update(Photo(preset, seed, kind, channel, r.n_totems, r.placement)
                        for kind in r.kinds for channel in channels)
-    return sorted(out, key=lambda p: (p.preset, p.seed, str(p.n_totems), p.kind,
-                                      p.channel))
+    return sorted(out, key=lambda p: (p.preset, p.seed, str(p.n_totems),
+                                      str(p.placement), p.kind, p.channel))
 
 
 check_disjoint()

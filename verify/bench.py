@@ -30,6 +30,7 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
+from scenes.presets import DEFAULT_PLACEMENT
 from verify.batch import Engine
 from verify.patches import METRICS
 from verify.runs import Run, fingerprint, run_all
@@ -72,12 +73,16 @@ def find_scenes(roots) -> list[Path]:
 
 
 def describe_scene(scene: Path) -> dict:
-    """Preset, manipulation kind and number of totems of a scene folder, as recorded."""
+    """Preset, placement of the totems, manipulation kind and number of totems of a
+    scene folder, as recorded (placement "" when unknown: a real photo)."""
     info = {"scene": str(scene), "name": scene.name, "preset": "real", "kind": "none",
-            "n_totems": len(list((scene / "totem_masks").glob("*.png")))}
+            "n_totems": len(list((scene / "totem_masks").glob("*.png"))), "placement": ""}
     sj = scene / "truth" / "scene.json"
     if sj.is_file():
-        info["preset"] = json.loads(sj.read_text()).get("preset", "synthetic")
+        desc = json.loads(sj.read_text())
+        info["preset"] = desc.get("preset", "synthetic")
+        info["placement"] = desc.get("placement", DEFAULT_PLACEMENT.get(info["preset"],
+                                                                        "floating"))
     tj = scene / "truth" / "tamper.json"
     if tj.is_file():
         info["kind"] = json.loads(tj.read_text()).get("kind", "unknown")
@@ -294,8 +299,8 @@ def markdown(bench: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-CSV_FIELDS = ["name", "preset", "kind", "n_totems", "mode", "status", "verdict", "score",
-              "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
+CSV_FIELDS = ["name", "preset", "placement", "kind", "n_totems", "mode", "status", "verdict",
+              "score", "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
               *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error"]
 
 
