@@ -1,0 +1,157 @@
+"""What a Cycles totem scene holds, drawn from a seed: a plain dict (JSON), no Blender.
+
+Pure numpy (runs in ``.venv-cycles`` beside bpy, and in the package's venv). World frame
+Blender's: metres, +Z up, the ground (or the table top) at ``support_z``. The
+description lists the camera (Blender's parameters), the totems (world centres, one key),
+objects with procedural materials, lights, the world (a bundled HDRI or a colour) and the
+camera's pipeline (view transform, denoiser, pixel filter, samples).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:                                     # run as a script inside .venv-cycles
+    import blender_camera as bc
+except ImportError:                      # imported from the package's venv
+    from benchmarks.cycles import blender_camera as bc
+
+__all__ = ["KINDS", "HDRIS", "describe"]
+
+KINDS = ("room", "yard", "table")
+HDRIS = ("courtyard", "forest", "city", "sunset", "sunrise", "interior", "studio")
+SHAPES = ("cube", "cylinder", "cone", "torus", "ico", "monkey")
+TEXTURES = ("checker", "noise", "brick", "wave", "voronoi", "magic", "plain")
+VIEWS = ("AgX", "Filmic", "Standard")
+
+
+def _colour(rng, lo=0.05, hi=0.85) -> list:
+    return [float(c) for c in rng.uniform(lo, hi, 3)]
+
+
+def _material(rng, kind=None) -> dict:
+    return {"texture": kind or str(rng.choice(TEXTURES)), "c1": _colour(rng),
+            "c2": _colour(rng), "scale": float(rng.uniform(2.0, 12.0)),
+            "roughness": float(rng.uniform(0.25, 0.9))}
+
+
+def _camera(rng, kind: str, width: int, height: int) -> dict:
+    height_m = {"room": (0.7, 1.0), "yard": (0.75, 1.05), "table": (1.05, 1.2)}[kind]
+    pitch = {"room": (10, 18), "yard": (8, 16), "table": (6, 12)}[kind]
+    fov_x = float(rng.uniform(55.0, 70.0))
+    lens = 36.0 / 2.0 / np.tan(np.radians(fov_x) / 2.0) * width / max(width, height)
+    M = bc.look_matrix([0.0, 0.0, float(rng.uniform(*height_m))],
+                       float(rng.uniform(-10, 10)), float(rng.uniform(*pitch)))
+    return {"lens": float(lens), "sensor_width": 36.0, "sensor_fit": "AUTO",
+            "shift_x": float(rng.uniform(-0.03, 0.03)),
+            "shift_y": float(rng.uniform(-0.03, 0.03)), "matrix_world": M.tolist(),
+            "width": int(width), "height": int(height)}
+
+
+def _totems(rng, cam: dict, support_z: float, radius: float, n: int) -> list:
+    """``n`` totem centres (world), the first resting on the support, the others
+    floating; each silhouette whole in the lower part of the image, apart."""
+    W, H = cam["width"], cam["height"]
+    K, w2c = bc.opencv_from_blender(**{k: v for k, v in cam.items() if k not in
+                                       ("width", "height")}, width=W, height=H)
+    c2w = np.linalg.inv(w2c)
+    placed, discs = [], []
+    gap = 8.0 * W / 640.0
+    for attempt in range(20000):
+        if len(placed) == n:
+            break
+        if attempt % 2000 == 1999:                  # stuck: start again
+            placed, discs = [], []
+        resting = not placed
+        u = rng.uniform(0.1 * W, 0.9 * W)
+        v = rng.uniform(0.55 * H, (0.97 if resting else 0.9) * H)
+        ray = np.linalg.solve(K, [u, v, 1.0])
+        d_w = c2w[:3, :3] @ ray
+        o_w = c2w[:3, 3]
+        if resting:                       # slide along the pixel's ray to the support
+            if d_w[2] >= -1e-3:
+                continue
+            t = (support_z + radius - o_w[2]) / d_w[2]
+        else:
+            t = rng.uniform(1.0, 2.2) / np.linalg.norm(ray)
+        P_w = o_w + t * d_w
+        P_c = w2c[:3, :3] @ P_w + w2c[:3, 3]
+        depth = np.linalg.norm(P_c)
+        low = P_w[2] < support_z + radius + 0.08
+        if not 1.0 <= depth <= 2.2 or (not resting and low):
+            continue
+        r_px = K[0, 0] * radius / np.sqrt(max(depth**2 - radius**2, 1e-9)) * 1.15
+        uc, vc = K[:2, :2] @ (P_c[:2] / P_c[2]) + K[:2, 2]
+        if min(uc - r_px, vc - r_px, W - 1 - uc - r_px, H - 1 - vc - r_px) < gap:
+            continue
+        if any(np.hypot(uc - a, vc - b) < r_px + s + gap for a, b, s in discs):
+            continue
+        placed.append({"centre": P_w.tolist(), "resting": resting})
+        discs.append((uc, vc, r_px))
+    if len(placed) < n:
+        raise RuntimeError("could not place the totems; try another seed")
+    return placed
+
+
+def _objects(rng, kind: str, support_z: float) -> list:
+    """Primitives standing on the support ahead of the camera (and a few to the sides
+    and behind it, which only the totems see)."""
+    objs = []
+    n = int(rng.integers(5, 9))
+    for i in range(n):
+        behind = i >= n - 2
+        dist = rng.uniform(1.5, 3.0) if behind else rng.uniform(2.6, 5.5)
+        spread = 28 if kind == "table" and not behind else 40
+        ang = rng.uniform(-spread, spread) + (180 if behind else 0)
+        size = rng.uniform(0.12, 0.25) if kind == "table" else rng.uniform(0.25, 0.7)
+        if kind == "table" and not behind:
+            dist = rng.uniform(1.9, 2.8)
+        x, y = dist * np.sin(np.radians(ang)), dist * np.cos(np.radians(ang))
+        z = (0.0 if behind else support_z)
+        objs.append({"shape": str(rng.choice(SHAPES)), "location": [x, y, z + size / 2],
+                     "size": float(size), "yaw": float(rng.uniform(0, 360)),
+                     "material": _material(rng), "removable": not behind})
+    return objs
+
+
+def describe(seed: int, *, kind: str | None = None, size=(640, 480),
+             samples: int = 96) -> dict:
+    """The scene of ``seed`` (``kind`` drawn from it unless given) at ``size`` (W, H)."""
+    rng = np.random.default_rng([38, int(seed)])
+    kind = kind or KINDS[int(rng.integers(len(KINDS)))]
+    W, H = int(size[0]), int(size[1])
+    cam = _camera(rng, kind, W, H)
+    support_z = 0.75 if kind == "table" else 0.0
+    radius = float(rng.uniform(0.05, 0.08) if kind == "table" else rng.uniform(0.06, 0.1))
+    ior = float(rng.uniform(1.45, 1.55))
+    totems = _totems(rng, cam, support_z, radius, int(rng.integers(4, 6)))
+    world = ({"hdri": str(rng.choice(HDRIS[:5])),
+              "strength": float(rng.uniform(0.8, 1.4)),
+              "rotation_deg": float(rng.uniform(0, 360))} if kind == "yard" else
+             {"hdri": str(rng.choice(HDRIS[5:])),
+              "strength": float(rng.uniform(0.3, 0.7)),
+              "rotation_deg": float(rng.uniform(0, 360))} if kind == "table" else
+             {"colour": _colour(rng, 0.02, 0.1), "strength": 1.0})
+    sun = {"type": "SUN", "energy": float(rng.uniform(1.5, 3.0)),
+           "rotation_deg": [float(rng.uniform(20, 50)), 0.0, float(rng.uniform(0, 360))]}
+    area = {"type": "AREA", "energy": float(rng.uniform(250, 500)), "size": 2.0,
+            "location": [float(rng.uniform(-1, 1)), float(rng.uniform(1.5, 3.5)), 2.8]}
+    lights = {"yard": [sun], "table": [sun, area], "room": [area]}[kind]
+    view = str(rng.choice(VIEWS))
+    return {
+        "format": 1, "renderer": "cycles", "kind": kind, "seed": int(seed),
+        "camera": cam, "support_z": support_z,
+        "key": {"radius": radius, "ior": ior}, "totems": totems,
+        "objects": _objects(rng, kind, support_z),
+        "floor": _material(rng, str(rng.choice(["checker", "brick", "noise",
+                                                 "voronoi"]))),
+        "walls": _material(rng) if kind == "room" else None,
+        "table": _material(rng, "wave") if kind == "table" else None,
+        "world": world, "lights": lights,
+        "pipeline": {"view_transform": view, "look": "None",
+                     "exposure": float(rng.uniform(-0.3, 0.3)),
+                     "denoise": bool(rng.random() < 0.6),
+                     "filter": str(rng.choice(["BLACKMAN_HARRIS", "GAUSSIAN"])),
+                     "filter_width": float(rng.uniform(1.2, 1.8)),
+                     "samples": int(samples), "sampling_seed": int(seed)},
+    }

@@ -1,0 +1,90 @@
+"""A tiny Cycles render (benchmarks/cycles, run in .venv-cycles): a marker on the pixel
+K puts it on, and a sphere's Cycles silhouette equal to the analytic one.
+
+Runs only where ``make cycles-env`` has made ``.venv-cycles`` with bpy; skipped
+otherwise.
+"""
+
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.cycles.blender_camera import look_matrix
+from benchmarks.cycles.convert import read_render, sphere_masks
+from scenes import camera
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = ROOT / ".venv-cycles" / "bin" / "python"
+
+
+def _has_bpy() -> bool:
+    if not PY.is_file():
+        return False
+    r = subprocess.run([str(PY), "-c", "import bpy"], capture_output=True, timeout=120)
+    return r.returncode == 0
+
+
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(not _has_bpy(), reason="no .venv-cycles with bpy "
+                                 "(make cycles-env)")]
+
+
+def _desc(W=160, H=120):
+    """A dark world, one emissive marker off the axis, one glass totem; a camera turned
+    and tilted, with a principal point off the centre (shift)."""
+    cam = {"lens": 30.0, "sensor_width": 36.0, "sensor_fit": "AUTO", "shift_x": 0.041,
+           "shift_y": -0.027, "width": W, "height": H,
+           "matrix_world": look_matrix([0.2, -0.1, 1.0], 9.0, 11.0).tolist()}
+    M = np.asarray(cam["matrix_world"])
+
+    def ahead(x, y, d):                  # a point d along the view, offset in its frame
+        return (M[:3, 3] + d * (M[:3, :3] @ np.array([x, y, -1.0]))).tolist()
+
+    return {"format": 1, "kind": "test", "seed": 0, "camera": cam, "support_z": 0.0,
+            "key": {"radius": 0.12, "ior": 1.5},
+            "totems": [{"centre": ahead(0.2, -0.12, 1.6), "resting": False}],
+            "markers": [{"centre": ahead(-0.21, 0.13, 2.0), "radius": 0.03,
+                         "strength": 5.0}],
+            "objects": [], "floor": None, "walls": None, "table": None,
+            "world": {"colour": [0.0, 0.0, 0.0], "strength": 0.0}, "lights": [],
+            "pipeline": {"view_transform": "Standard", "denoise": False,
+                         "filter": "GAUSSIAN", "filter_width": 1.5, "samples": 256,
+                         "sampling_seed": 1}}
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cycles")
+    (tmp / "desc.json").write_text(json.dumps(_desc()))
+    r = subprocess.run([str(PY), str(ROOT / "benchmarks" / "cycles" / "render.py"),
+                        str(tmp / "out"), "--desc", str(tmp / "desc.json"), "--linear"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return tmp / "out"
+
+
+def test_marker_lands_on_its_pixel(rendered):
+    rec = read_render(rendered)
+    w2c = rec["w2c"]
+    P = w2c[:3, :3] @ np.asarray(rec["description"]["markers"][0]["centre"]) + w2c[:3, 3]
+    u, v = camera.project(rec["K"], P)
+    lin = np.load(rendered / "linear.npy").sum(axis=-1)
+    iu, iv = int(round(u)), int(round(v))
+    win = lin[iv - 6:iv + 7, iu - 6:iu + 7]                 # the marker and its blur
+    assert win.sum() > 0 and lin.sum() - win.sum() < 1e-3 * win.sum()
+    yy, xx = np.mgrid[iv - 6:iv + 7, iu - 6:iu + 7]
+    centroid = np.array([(xx * win).sum(), (yy * win).sum()]) / win.sum()
+    assert np.hypot(*(centroid - [u, v])) < 0.05, (centroid, (u, v))
+
+
+def test_sphere_mask_is_the_analytic_silhouette(rendered):
+    rec = read_render(rendered)
+    ids = np.load(rendered / "ids.npy")
+    exact = sphere_masks(rec["K"], rec["centres"], 0.12, ids.shape)[0]
+    cycles = ids == rec["totem_index"]
+    assert exact.sum() > 300                                 # a sphere of some size
+    outline = exact ^ np.roll(exact, 1, 0) | exact ^ np.roll(exact, 1, 1)
+    assert (exact != cycles).sum() <= 0.02 * outline.sum(), (exact != cycles).sum()
