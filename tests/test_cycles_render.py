@@ -52,7 +52,7 @@ def _desc(W=160, H=120):
             "world": {"colour": [0.0, 0.0, 0.0], "strength": 0.0}, "lights": [],
             "pipeline": {"view_transform": "Standard", "denoise": False,
                          "filter": "GAUSSIAN", "filter_width": 1.5, "samples": 256,
-                         "sampling_seed": 1}}
+                         "sampling_seed": 1, "metered_ev": 0.0}}
 
 
 @pytest.fixture(scope="module")

@@ -97,11 +97,13 @@ def write_untouched(render_dir, out) -> Path:
                               truth=truth)
 
 
-def write_removed(render_dir, scene_dir, out, *, grow: int = 2) -> Path | None:
-    """The removal from the camera's view only: the photo with, over the removed
-    object's directly seen pixels (grown by ``grow`` px for the pixel filter and the
-    denoiser), the render in which that object was hidden from camera rays; the totems
-    still see it, and it still casts its shadow. None when the render has none.
+def write_removed(render_dir, scene_dir, out, *, grow: int = 2,
+                  level: int = 4) -> Path | None:
+    """An object removed from the camera's view only: outside the totems, the photo
+    takes the render without the object (its shadow and light gone with it) where that
+    render differs by more than ``level`` of 255 in a channel, or lies within ``grow``
+    px of the object's own pixels; the totem pixels stay the photo's, so the totems
+    still see it (the preset ``remove``'s perfect forger). None when there is none.
 
     Written as a tampered copy of ``scene_dir`` (manip_mask.png, truth/tamper.json of
     kind ``remove``, ``renderer`` "cycles")."""
@@ -114,12 +116,16 @@ def write_removed(render_dir, scene_dir, out, *, grow: int = 2) -> Path | None:
     ids = np.load(Path(render_dir) / "ids.npy")
     scene = folder.read_scene(scene_dir)
     totems = scene.masks.any(axis=0)
-    seen = ndimage.binary_dilation(ids == rec["removed_index"], iterations=grow) & ~totems
     src = folder.photo_path(scene_dir)
     photo = _png(src)
-    image = np.where(seen[..., None], _png(Path(render_dir) / "removed.png"), photo)
+    removed = _png(Path(render_dir) / "removed.png")
+    differs = np.abs(removed.astype(int) - photo).max(axis=-1) > level
+    seen = ndimage.binary_dilation(ids == rec["removed_index"], iterations=grow)
+    take = (differs | seen) & ~totems
+    image = np.where(take[..., None], removed, photo)
     changed = np.any(image != photo, axis=-1)
-    record = {"format": 1, "editor": "cycles visible_camera = False", "kind": "remove",
+    record = {"format": 1, "editor": "cycles, rendered without the object",
+              "kind": "remove",
               "renderer": "cycles", "seed": rec["description"]["seed"],
               "object_index": rec["removed_index"],
               "source": {"folder": Path(scene_dir).name,

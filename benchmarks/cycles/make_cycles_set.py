@@ -10,8 +10,9 @@ renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
 
   cycles-<kind>-s<seed>/          the untouched scene folder (``convert.write_untouched``)
   cycles-<kind>-s<seed>-<edit>/   2D edits of it by ``totems tamper`` (scenes.tamper)
-  cycles-<kind>-s<seed>-remove/   an object hidden from camera rays only, re-rendered by
-                                  Cycles (``convert.write_removed``)
+  cycles-<kind>-s<seed>-remove/   an object removed from the camera's view only: the
+                                  photo outside the totems re-rendered by Cycles without
+                                  it (``convert.write_removed``)
   _renders/s<seed>/               Cycles' own output (render.json, photo, ids...), kept;
                                   a render found there finished is not made again.
 

@@ -7,10 +7,11 @@
 
 Writes OUT/: photo.png (the camera's photo: its view transform, denoiser and pixel
 filter), clean.png (the same without the totems), ids.npy (the object each pixel centre
-sees first, ``blender_scene.render_ids``), removed.png with ``--remove`` (one object
-hidden from camera rays only), linear.npy with ``--linear`` (scene-linear photo), and
-render.json last (the description, Blender's camera as it held it, timings). The scene
-folder is written from it by ``convert.py`` in the package's venv.
+sees first, ``blender_scene.render_ids``), removed.png with ``--remove`` (the photo
+without one object; ``convert.py`` keeps the totems' pixels), linear.npy with
+``--linear`` (the scene-linear photo), and render.json last (the description, Blender's
+camera as it held it, timings). The scene folder is written from it by ``convert.py``
+in the package's venv.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ def main(argv=None) -> int:
     ap.add_argument("--small", action="store_true", help="160x120, 16 samples (tests)")
     ap.add_argument("--samples", type=int, default=96)
     ap.add_argument("--remove", action="store_true",
-                    help="also render with one object hidden from the camera only")
+                    help="also render without one object (for the camera's view)")
     ap.add_argument("--linear", action="store_true", help="also the scene-linear photo")
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args(argv)
@@ -64,6 +65,10 @@ def main(argv=None) -> int:
         return r
 
     p = desc["pipeline"]
+    if "metered_ev" not in p:            # a camera's auto exposure, then its bias
+        p["metered_ev"] = timed("meter_s", bs.meter, os.path.join(out, "meter.exr"), p)
+        os.remove(os.path.join(out, "meter.exr"))
+    p = dict(p, exposure=p.get("exposure", 0.0) + p["metered_ev"])
     timed("photo_s", bs.render_png, os.path.join(out, "photo.png"), p)
     if a.linear:
         lin = timed("linear_s", bs.render_linear, os.path.join(out, "linear.exr"), p)
@@ -77,13 +82,9 @@ def main(argv=None) -> int:
         removed = _removable(desc, parts, ids)
         if removed is not None:
             obj = parts["objects"][removed]
-            bs.set_visible(obj, camera=False)
-            ys, xs = np.nonzero(ids == removed + 1)
-            m, (h, w) = 24, ids.shape
-            border = (max(xs.min() - m, 0), max(ys.min() - m, 0),
-                      min(xs.max() + 1 + m, w), min(ys.max() + 1 + m, h))
-            timed("removed_s", bs.render_png, os.path.join(out, "removed.png"), p, border)
-            bs.set_visible(obj, camera=True)
+            bs.set_visible(obj, render=False)
+            timed("removed_s", bs.render_png, os.path.join(out, "removed.png"), p)
+            bs.set_visible(obj, render=True)
     for t in parts["totems"]:
         bs.set_visible(t, render=False)
     timed("clean_s", bs.render_png, os.path.join(out, "clean.png"), p)
