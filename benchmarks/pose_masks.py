@@ -1,13 +1,16 @@
-"""Totem poses from masks drawn the way people draw them: from the mask alone and from
-the photo's edges (``inverse.rim``), against the truth.
+"""Totem poses from masks drawn the way people draw them: from the mask alone, from the
+photo's rim (``inverse.rim``) and from both weighed (``inverse.pose_combined``, the
+default), against the truth.
 
     python benchmarks/pose_masks.py SCENE... [--families a,b] [--seed N] [--jpeg Q]
 
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
 ``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
-distance, median and worst, for the mask's own pose and for the photo's. ``--jpeg Q``:
-the photo through a JPEG of quality Q first. Seconds per photo; no fit.
+distance, median and worst, for the mask's own pose, the photo's rim and the two weighed,
+and how often the weighed pose's reported uncertainty covers its true error (the true
+centre inside the 95 % ellipsoid of its sd along the line of sight and across it).
+``--jpeg Q``: the photo through a JPEG of quality Q first. Seconds per photo; no fit.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from inverse import pose, rim
+from inverse import pose, pose_combined, rim
+from scenes import silhouette
 from scenes import drawn_masks, folder
 from scenes.errors import BadInput
 
@@ -33,11 +37,13 @@ def photo(scene, jpeg: int | None) -> np.ndarray:
 
 
 def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
-    """{family: [(mask error %, photo error %) per totem]} for one scene folder."""
+    """{family: [(mask error %, rim error %, combined error %, covered 0/1) per totem]}
+    for one scene folder."""
     scene, truth = folder.read_scene(scene_dir), folder.read_truth(scene_dir)
     K = np.asarray(scene.K, np.float64)
     img = photo(scene, jpeg)
     R = np.broadcast_to(np.asarray(scene.radius, np.float64), (scene.n_totems,))
+    grad = silhouette.gradients(np.ascontiguousarray(img), rim.SIGMA_PX)
     out = {}
     for name in families:
         if name == "auto":
@@ -46,7 +52,7 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             try:
                 masks = propose_masks(img, n=scene.n_totems, K=K)
             except BadInput:
-                out[name] = [(np.nan, np.nan)] * scene.n_totems
+                out[name] = [(np.nan,) * 4] * scene.n_totems
                 continue
         elif name == "exact":
             masks = np.asarray(scene.masks, bool)
@@ -59,13 +65,26 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             try:
                 P_mask = pose.initial_pose(m[None], K, R[j])[0]
             except BadInput:
-                rows.append((np.nan, np.nan))
+                rows.append((np.nan,) * 4)
                 continue
-            P_photo = rim.refine_centres(img, P_mask[None], R[j:j + 1], K)[0]
+            P_photo = rim.refine_centre(P_mask, R[j], K, grad)
+            c = pose_combined.combine_centre(m, R[j], K, grad, j=j)
             rows.append((100 * np.linalg.norm(P_mask - P_true) / dist,
-                         100 * np.linalg.norm(P_photo - P_true) / dist))
+                         100 * np.linalg.norm(P_photo - P_true) / dist,
+                         100 * np.linalg.norm(c.center - P_true) / dist, covered(c, P_true)))
         out[name] = rows
     return out
+
+
+def covered(c, P_true) -> float:
+    """1 when the true centre lies inside the 95 % ellipsoid of the combined pose's sd
+    along the line of sight and across it (chi-square, 3 degrees of freedom), else 0."""
+    e = P_true - c.center
+    los = c.center / np.linalg.norm(c.center)
+    along = e @ los
+    across2 = e @ e - along ** 2
+    chi2 = along ** 2 / max(c.sd_along, 1e-12) ** 2 + across2 / max(c.sd_across, 1e-12) ** 2
+    return float(chi2 <= 7.815)
 
 
 def main(argv=None) -> int:
@@ -75,29 +94,37 @@ def main(argv=None) -> int:
                    default=",".join(["exact"] + list(drawn_masks.FAMILIES) + ["auto"]))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jpeg", type=int, default=None)
+    p.add_argument("--rows", type=Path, default=None,
+                   help="also write every totem's row as JSON {scene: {family: rows}}")
     args = p.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     fams = args.families.split(",")
     table = {f: [] for f in fams}
     t0 = time.perf_counter()
+    per_scene = {}
     for s in args.scenes:
-        for f, rows in errors(s, fams, rng, args.jpeg).items():
+        per_scene[str(s)] = errors(s, fams, rng, args.jpeg)
+        for f, rows in per_scene[str(s)].items():
             table[f] += rows
-    print("| masks | from the mask: median / worst (% of distance) | from the photo | n |")
-    print("|---|---|---|---|")
-    both = []
-    for f, rows in table.items():
-        a = np.array(rows, float).reshape(-1, 2)
+    if args.rows is not None:
+        import json
+
+        args.rows.write_text(json.dumps(per_scene, default=float))
+    print("| masks | mask: median / worst (% of distance) | rim | weighed | covered | n |")
+    print("|---|---|---|---|---|---|")
+
+    def line(name, a):
         ok = np.isfinite(a).all(1)
-        both.append(a[ok])
         if not ok.any():
-            print(f"| {f} | refused | refused | 0 of {len(a)} |")
-            continue
-        print(f"| {f} | {np.median(a[ok, 0]):.2f} / {a[ok, 0].max():.2f} | "
-              f"{np.median(a[ok, 1]):.2f} / {a[ok, 1].max():.2f} | {ok.sum()} of {len(a)} |")
-    a = np.concatenate(both)
-    print(f"| all | {np.median(a[:, 0]):.2f} / {a[:, 0].max():.2f} | "
-          f"{np.median(a[:, 1]):.2f} / {a[:, 1].max():.2f} | {len(a)} |")
+            return f"| {name} | refused | refused | refused | | 0 of {len(a)} |"
+        b = a[ok]
+        cells = " | ".join(f"{np.median(b[:, k]):.2f} / {b[:, k].max():.2f}" for k in range(3))
+        return f"| {name} | {cells} | {100 * b[:, 3].mean():.0f} % | {ok.sum()} of {len(a)} |"
+
+    arrays = [np.array(rows, float).reshape(-1, 4) for rows in table.values()]
+    for f, a in zip(table, arrays):
+        print(line(f, a))
+    print(line("all", np.concatenate(arrays)))
     print(f"{time.perf_counter() - t0:.0f} s for {len(args.scenes)} photos")
     return 0
 

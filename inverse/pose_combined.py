@@ -1,0 +1,278 @@
+"""Totem pose from the mask and the photo together, each weighed by what it is worth.
+
+Both say where the sphere's outline lies: the mask's outline (:mod:`inverse.pose`) and
+the photo's edges near it. In the three numbers that move an outline, ``x = (du, dv,
+g)`` pixels (its axis's image moved by (du, dv), its size grown by g), the photo
+measures the mask's error arc by arc:
+
+    o_a = n_a . (du, dv) + g + b + e_a,
+
+``o_a`` the offset along the outward normal ``n_a`` of the edge nearest the outline on
+arc ``a`` (the nearest local peak of the blurred photo's step across it, not the
+strongest: the rim's reflection band puts a stronger edge 1.5-4 px inside on some
+arcs), ``b`` the edge's own bias (:data:`EDGE_BIAS_PX`) and ``e_a`` the arcs' scatter.
+A robust least-squares fit over the arcs (:func:`fit_offsets`) gives ``x_p`` and its
+covariance ``S_p``, to which the bias's spread from totem to totem is added.
+
+The mask lies on the silhouette when the edges nearest its outline agree, tightly, on
+its size (``|g| <= CONFIRM_SD`` sd, scatter at most :data:`TIGHT_PX`) and the rim's
+strongest edge (:mod:`inverse.rim`) is not outside it; then the mask's error is taken
+to be only what the photo shows beyond ``CONFIRM_SD`` sd, ``s_m^2 = max(0, x_p^2 -
+CONFIRM_SD^2 S_p)``, and a pixel-exact mask keeps its own pose. Otherwise ``x_p`` is
+measured from the rim's strongest edge and the mask's error is at least a drawn mask's
+slop, ``s_m^2 = max(x_p^2, MASK_SIGMA_PX^2)``. Either way the mask's outline residual
+beyond a pixel mask's steps (a polygon's chords) adds to ``s_m^2``, and the outline
+moves by ``w x_p`` with the inverse-variance weight ``w = s_m^2 / (s_m^2 + S_p)``.
+
+How sure: the outline's variance ``w S_p + (1 - w) min(x_p^2, S_p)`` (the photo right,
+or the mask right and off by at most what the photo saw), plus, in size, the other
+edges along the outline weighed by their strength (:func:`size_ambiguity`), mapped to
+the centre by the Jacobian of ``x -> P``: one sd along the line of sight and across it.
+
+Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
+weighed".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inverse import pose, rim
+from scenes import camera, silhouette
+
+__all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
+           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "SHAPE_QUANT_PX", "TIGHT_PX",
+           "NEAR_ITERATIONS", "REFINE_ITERATIONS", "REFINE_WINDOW_PX", "OUTER_PX",
+           "AMBIGUITY_POWER", "move_of", "size_ambiguity", "POSE_FROM",
+           "uncertainty_record", "initial_centres", "CombinedPose", "edge_offsets",
+           "fit_offsets", "photo_move", "combine_centre", "combined_poses"]
+
+ARCS = 12              # arcs the outline is cut into (each one edge offset)
+WINDOW_PX = 3.0        # how far along each normal the nearest edge is looked for (pixels)
+STEP_PX = 0.25         # the profile's sampling step along the normal (pixels)
+PEAK_FRACTION = 0.3    # a local peak counts when at least this fraction of its arc's top
+EDGE_BIAS_PX = -0.15   # where the nearest edge lies from the silhouette (pixels, outward)
+EDGE_BIAS_SD_PX = 0.2   # that bias's spread from totem to totem (pixels, 1 sd)
+AMBIGUITY_POWER = 4    # how a weaker edge along the outline counts against the chosen one
+ITERATIONS = 3         # re-measurements from the moved outline
+NEAR_ITERATIONS = 2    # the same from the mask's outline, for the edge nearest it
+REFINE_ITERATIONS = 2  # the same from the rim's strongest edge, ...
+REFINE_WINDOW_PX = 1.0  # ... looking this far along each normal
+OUTER_PX = 0.5         # a rim edge this far outside the mask's nearest: the mask is inside
+SHAPE_QUANT_PX = 0.25  # rms distance of a pixel-exact mask's outline from a smooth one
+TIGHT_PX = 0.3        # the arcs' edges agree on the outline's size to this (pixels, 1 sd)
+CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd
+
+
+@dataclass
+class CombinedPose:
+    """One totem's centre and what it rests on. Lengths in metres, outline in pixels."""
+
+    center: np.ndarray      # (3,) camera frame
+    sd_along: float         # 1 sd of the centre along the line of sight
+    sd_across: float        # 1 sd across it (each of the two lateral directions)
+    mask_center: np.ndarray  # (3,) the mask's own pose
+    photo_move: np.ndarray  # (3,) x_p: the photo's edge minus the mask's outline (du, dv, g)
+    photo_cov: np.ndarray   # (3, 3) its covariance S_p
+    mask_sd: np.ndarray     # (3,) s_m per component
+    weight: np.ndarray      # (3,) w: 0 keeps the mask's outline, 1 takes the photo's
+    shape_rms_px: float     # the mask outline's rms distance from the best sphere outline
+    on_edge: bool = False   # the mask's outline lies on the photo's nearest edge in size
+
+
+def edge_offsets(P, R: float, K, grad, *, arcs: int = ARCS,
+                 window_px: float = WINDOW_PX) -> tuple[np.ndarray, np.ndarray]:
+    """Each arc's mean outward normal (arcs, 2) and the offset (arcs,) pixels, outward
+    positive, of the edge nearest the outline of the sphere (``P`` (3,) metres, ``R``
+    metres) on that arc: the nearest local peak of the arc's mean step profile that
+    reaches :data:`PEAK_FRACTION` of the arc's top (NaN where there is none)."""
+    pts, nrm = rim.outline(P, R, K)
+    ts = np.arange(-window_px, window_px + 1e-9, STEP_PX)
+    prof = np.stack([silhouette.edge_at(pts + t * nrm, nrm, *grad) for t in ts], 1)
+    m = len(pts) // arcs * arcs
+    prof = prof[:m].reshape(arcs, -1, len(ts)).mean(1)            # (arcs, T)
+    normals = nrm[:m].reshape(arcs, -1, 2).mean(1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offsets = np.full(arcs, np.nan)
+    for a, p in enumerate(prof):
+        inner = p[1:-1]
+        peak = (inner >= p[:-2]) & (inner > p[2:]) & (inner >= PEAK_FRACTION * p.max())
+        idx = np.flatnonzero(peak) + 1
+        if idx.size and p.max() > 0:
+            i = idx[np.argmin(np.abs(ts[idx]))]
+            # sub-sample peak: the parabola through the three samples
+            den = p[i - 1] - 2 * p[i] + p[i + 1]
+            offsets[a] = ts[i] + (0.5 * STEP_PX * (p[i - 1] - p[i + 1]) / den if den < 0
+                                  else 0.0)
+    return normals, offsets
+
+
+def fit_offsets(normals, offsets) -> tuple[np.ndarray, np.ndarray]:
+    """``x = (du, dv, g)`` pixels from the arcs' offsets, ``o_a = n_a . (du, dv) + g``,
+    by iteratively reweighted least squares (Tukey's biweight, scale from the median
+    absolute residual), and its covariance (3, 3) pixels squared (the residuals' robust
+    scale, at least a quarter pixel, through the weighted design)."""
+    ok = np.isfinite(offsets)
+    A = np.column_stack([normals[ok], np.ones(ok.sum())])
+    o = offsets[ok]
+    if len(o) < 4:
+        return np.zeros(3), np.diag([WINDOW_PX ** 2] * 3)
+    w = np.ones(len(o))
+    for _ in range(8):
+        Aw = A * w[:, None]
+        x = np.linalg.lstsq(Aw.T @ A, Aw.T @ o, rcond=None)[0]
+        r = o - A @ x
+        s = max(1.4826 * np.median(np.abs(r)), 0.25)
+        u = r / (4.685 * s)
+        w = np.where(np.abs(u) < 1, (1 - u ** 2) ** 2, 0.0)
+        if w.sum() < 4:
+            w = np.ones(len(o))
+    Aw = A * w[:, None]
+    n_eff = max(w.sum() - 3, 1.0)
+    s2 = max((w * r ** 2).sum() / n_eff, 0.25 ** 2)
+    cov = s2 * np.linalg.pinv(Aw.T @ A) * len(o) / max(w.sum(), 1.0)
+    return x, cov
+
+
+def move_of(P0, P, R: float, K) -> np.ndarray:
+    """The outline move ``x`` (3,) pixels that takes ``P0``'s outline to ``P``'s (the
+    inverse of ``rim._moved``)."""
+    uv = camera.project(K, np.stack([P0, P]))
+    half = np.arcsin(np.clip(R / np.linalg.norm([P0, P], axis=1), 0.0, 1.0))
+    return np.array([*(uv[1] - uv[0]), K[0, 0] * (half[1] - half[0])])
+
+
+def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATIONS,
+               window_px: float = WINDOW_PX):
+    """The photo's nearest edge as a move ``x`` (3,) pixels of ``P0``'s outline (du, dv,
+    g, the edge bias taken off) and its covariance (3, 3): measured from ``start`` (a
+    move, default none), the outline moved there, measured again."""
+    x = np.zeros(3) if start is None else np.asarray(start, np.float64).copy()
+    cov = np.diag([WINDOW_PX ** 2] * 3)
+    for _ in range(iterations):
+        normals, off = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
+                                    window_px=window_px)
+        dx, cov = fit_offsets(normals, off - EDGE_BIAS_PX)
+        x = x + dx
+        if np.abs(dx).max() < 0.05:
+            break
+    return x, cov + np.eye(3) * EDGE_BIAS_SD_PX ** 2
+
+
+def size_ambiguity(P0, R: float, K, grad, x, *, reach_px: float = rim.GROW_PX) -> float:
+    """Variance (pixels squared) of the outline's size from the other edges along it:
+    the whole outline's mean step at sizes ``x[2] + t`` (``|t| <= reach_px``); each local
+    peak other than the nearest to ``t = 0`` weighs ``(peak / top) ** AMBIGUITY_POWER``
+    and adds that share of ``t^2`` (the reflection band's inner edge, a shadow's)."""
+    ts = np.arange(-reach_px, reach_px + 1e-9, STEP_PX)
+    prof = np.array([rim.edge_score(rim._moved(P0, R, K, x + np.array([0, 0, t])), R, K,
+                                    grad) for t in ts])
+    inner = prof[1:-1]
+    idx = np.flatnonzero((inner >= prof[:-2]) & (inner > prof[2:])) + 1
+    if idx.size < 2 or prof.max() <= 0:
+        return 0.0
+    p = (prof[idx] / prof.max()) ** AMBIGUITY_POWER
+    near = np.argmin(np.abs(ts[idx]))
+    p[near] = max(p[near], 1.0)                 # the chosen edge counts as sure
+    return float((p * ts[idx] ** 2).sum() / p.sum())
+
+
+def _jacobian(P0, R, K, x, h=0.05) -> np.ndarray:
+    """d centre / d x (3, 3), metres per pixel, by central differences."""
+    return np.stack([(rim._moved(P0, R, K, x + h * e) - rim._moved(P0, R, K, x - h * e))
+                     / (2 * h) for e in np.eye(3)], 1)
+
+
+def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
+    """:class:`CombinedPose` of one totem from its mask (H, W) bool and the photo's
+    gradients ``grad`` (:func:`scenes.silhouette.gradients`, ``rim.SIGMA_PX``)."""
+    K = np.asarray(K, np.float64)
+    uv = pose.mask_outline_uv(mask, j=j)
+    rays = camera.pixel_rays(K, uv[:, 0], uv[:, 1])
+    P_m, shape_rms = pose.pose_conic(rays, K, R, uv=uv)
+    # the mask pose's own spread: the outline's residual over its independent points
+    # (a pixel outline's steps are correlated over about four)
+    quant_px = max(shape_rms, 0.1) / np.sqrt(max(len(uv) / 4.0, 1.0))
+    # the edge nearest the mask's outline: does the mask lie on the silhouette?
+    x_n, S_n = photo_move(P_m, R, K, grad, iterations=NEAR_ITERATIONS)
+    scatter_g = np.sqrt(max(S_n[2, 2] - EDGE_BIAS_SD_PX ** 2, 0.0))
+    # the rim's strongest edge near the mask (inverse.rim), its bias taken off
+    x_r = move_of(P_m, rim.refine_centre(P_m, R, K, grad), R, K)
+    x_r[2] -= EDGE_BIAS_PX
+    on_edge = x_n[2] ** 2 <= CONFIRM_SD ** 2 * S_n[2, 2] and scatter_g <= TIGHT_PX \
+        and x_r[2] - x_n[2] <= OUTER_PX
+    if on_edge:
+        x_p, S = x_n, S_n
+    else:                     # not on an edge: the rim's strongest edge, then its nearest
+        x_p, S = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
+                            window_px=REFINE_WINDOW_PX)
+    S_p = np.diag(S)
+    shape2 = max(shape_rms ** 2 - SHAPE_QUANT_PX ** 2, 0.0)   # beyond a pixel mask's steps
+    if on_edge:               # the mask is off only where the photo says so beyond doubt
+        s_m2 = np.maximum(x_p ** 2 - CONFIRM_SD ** 2 * S_p, 0.0)
+    else:                     # off an edge: a drawn mask's slop, or what the photo saw
+        s_m2 = np.maximum(x_p ** 2, rim.MASK_SIGMA_PX ** 2)
+    s_m2 = s_m2 + shape2 + quant_px ** 2
+    w = s_m2 / (s_m2 + S_p)
+    x = w * x_p
+    # the photo right (its variance) or the mask right (then off by at most what the
+    # photo saw, within the photo's own spread)
+    post = w * S_p + (1 - w) * np.minimum(x_p ** 2, S_p) + shape2 + quant_px ** 2
+    post[2] += size_ambiguity(P_m, R, K, grad, x)
+    J = _jacobian(P_m, R, K, x)
+    C = J @ np.diag(post) @ J.T                               # centre covariance, m^2
+    P = rim._moved(P_m, R, K, x)
+    los = P / np.linalg.norm(P)
+    along = float(np.sqrt(max(los @ C @ los, 0.0)))
+    across = float(np.sqrt(max(0.5 * (np.trace(C) - los @ C @ los), 0.0)))
+    return CombinedPose(center=P, sd_along=along, sd_across=across, mask_center=P_m,
+                        photo_move=x_p, photo_cov=S, mask_sd=np.sqrt(s_m2), weight=w,
+                        shape_rms_px=float(shape_rms), on_edge=bool(on_edge))
+
+
+def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
+    """:func:`combine_centre` for every totem: ``image`` (H, W, 3) sRGB [0, 1], ``masks``
+    (n, H, W) bool, ``K`` (3, 3), ``radius`` (n,) or one, metres. BadInput for an
+    unusable mask or key (:func:`inverse.pose.initial_pose` checks them first)."""
+    masks = np.asarray(masks, bool)
+    if masks.ndim == 2:
+        masks = masks[None]
+    R = np.broadcast_to(np.asarray(radius, np.float64), (len(masks),))
+    pose.initial_pose(masks, K, R)                  # the masks' and key's checks
+    grad = silhouette.gradients(np.ascontiguousarray(np.asarray(image, np.float32)),
+                                rim.SIGMA_PX)
+    return [combine_centre(m, float(r), K, grad, j=j) for j, (m, r) in
+            enumerate(zip(masks, R))]
+
+
+POSE_FROM = ("both", "photo", "mask")
+"""``both``: the mask and the photo weighed (the default); ``photo``: the rim's strongest
+edge near each mask (:mod:`inverse.rim`); ``mask``: the mask's outline alone."""
+
+
+def uncertainty_record(c: CombinedPose) -> dict:
+    """fit.json's ``pose_uncertainty`` entry of one totem: 1 sd along the line of sight
+    and across it in millimetres, and the share of the outline's size taken from the
+    mask (1: the mask's, 0: the photo's)."""
+    return {"along_mm": round(1e3 * c.sd_along, 2), "across_mm": round(1e3 * c.sd_across, 2),
+            "mask_share": round(float(1.0 - c.weight[2]), 3)}
+
+
+def initial_centres(image, masks, K, radius, pose_from: str = "both"):
+    """The fit's initial centres (n, 3) metres from the masks and the photo, and each
+    one's :func:`uncertainty_record` (None unless ``pose_from`` is "both", the default;
+    "photo" and "mask" are overrides, :data:`POSE_FROM`). BadInput for another value or
+    unusable masks."""
+    from scenes.errors import BadInput
+
+    if pose_from not in POSE_FROM:
+        raise BadInput(f"pose_from must be one of {', '.join(POSE_FROM)}, got {pose_from!r}")
+    if pose_from == "both":
+        poses = combined_poses(image, masks, K, radius)
+        return np.stack([c.center for c in poses]), [uncertainty_record(c) for c in poses]
+    centers = pose.initial_pose(masks, K, radius)
+    if pose_from == "photo":
+        centers = rim.refine_centres(image, centers, radius, K)
+    return centers, None
