@@ -37,8 +37,8 @@ def photo(scene, jpeg: int | None) -> np.ndarray:
 
 
 def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
-    """{family: [(mask error %, rim error %, combined error %, covered 0/1) per totem]}
-    for one scene folder."""
+    """{family: [(mask error %, rim error %, combined error %, covered 0/1, combined sd
+    along the line of sight %) per totem]} for one scene folder."""
     scene, truth = folder.read_scene(scene_dir), folder.read_truth(scene_dir)
     K = np.asarray(scene.K, np.float64)
     img = photo(scene, jpeg)
@@ -52,7 +52,7 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             try:
                 masks = propose_masks(img, n=scene.n_totems, K=K)
             except BadInput:
-                out[name] = [(np.nan,) * 4] * scene.n_totems
+                out[name] = [(np.nan,) * 5] * scene.n_totems
                 continue
         elif name == "exact":
             masks = np.asarray(scene.masks, bool)
@@ -65,13 +65,14 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             try:
                 P_mask = pose.initial_pose(m[None], K, R[j])[0]
             except BadInput:
-                rows.append((np.nan,) * 4)
+                rows.append((np.nan,) * 5)
                 continue
             P_photo = rim.refine_centre(P_mask, R[j], K, grad)
             c = pose_combined.combine_centre(m, R[j], K, grad, j=j)
             rows.append((100 * np.linalg.norm(P_mask - P_true) / dist,
                          100 * np.linalg.norm(P_photo - P_true) / dist,
-                         100 * np.linalg.norm(c.center - P_true) / dist, covered(c, P_true)))
+                         100 * np.linalg.norm(c.center - P_true) / dist, covered(c, P_true),
+                         100 * c.sd_along / dist))
         out[name] = rows
     return out
 
@@ -110,18 +111,20 @@ def main(argv=None) -> int:
         import json
 
         args.rows.write_text(json.dumps(per_scene, default=float))
-    print("| masks | mask: median / worst (% of distance) | rim | weighed | covered | n |")
-    print("|---|---|---|---|---|---|")
+    print("| masks | mask: median / worst (% of distance) | rim | weighed | covered | "
+          "sd along: median | n |")
+    print("|---|---|---|---|---|---|---|")
 
     def line(name, a):
         ok = np.isfinite(a).all(1)
         if not ok.any():
-            return f"| {name} | refused | refused | refused | | 0 of {len(a)} |"
+            return f"| {name} | refused | refused | refused | | | 0 of {len(a)} |"
         b = a[ok]
         cells = " | ".join(f"{np.median(b[:, k]):.2f} / {b[:, k].max():.2f}" for k in range(3))
-        return f"| {name} | {cells} | {100 * b[:, 3].mean():.0f} % | {ok.sum()} of {len(a)} |"
+        return (f"| {name} | {cells} | {100 * b[:, 3].mean():.0f} % | "
+                f"{np.median(b[:, 4]):.2f} | {ok.sum()} of {len(a)} |")
 
-    arrays = [np.array(rows, float).reshape(-1, 4) for rows in table.values()]
+    arrays = [np.array(rows, float).reshape(-1, 5) for rows in table.values()]
     for f, a in zip(table, arrays):
         print(line(f, a))
     print(line("all", np.concatenate(arrays)))

@@ -25,9 +25,9 @@ beyond a pixel mask's steps (a polygon's chords) adds to ``s_m^2``, and the outl
 moves by ``w x_p`` with the inverse-variance weight ``w = s_m^2 / (s_m^2 + S_p)``.
 
 How sure: the outline's variance ``w S_p + (1 - w) min(x_p^2, S_p)`` (the photo right,
-or the mask right and off by at most what the photo saw), plus, in size, the other
-edges along the outline weighed by their strength (:func:`size_ambiguity`), mapped to
-the centre by the Jacobian of ``x -> P``: one sd along the line of sight and across it.
+or the mask right and off by at most what the photo saw) and the mask outline's own,
+mapped to the centre by the Jacobian of ``x -> P``: one sd along the line of sight and
+across it.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
 weighed".
@@ -45,7 +45,7 @@ from scenes import camera, silhouette
 __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
            "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "SHAPE_QUANT_PX", "TIGHT_PX",
            "NEAR_ITERATIONS", "REFINE_ITERATIONS", "REFINE_WINDOW_PX", "OUTER_PX",
-           "AMBIGUITY_POWER", "move_of", "size_ambiguity", "POSE_FROM",
+           "move_of", "POSE_FROM",
            "uncertainty_record", "initial_centres", "CombinedPose", "edge_offsets",
            "fit_offsets", "photo_move", "combine_centre", "combined_poses"]
 
@@ -55,7 +55,6 @@ STEP_PX = 0.25         # the profile's sampling step along the normal (pixels)
 PEAK_FRACTION = 0.3    # a local peak counts when at least this fraction of its arc's top
 EDGE_BIAS_PX = -0.15   # where the nearest edge lies from the silhouette (pixels, outward)
 EDGE_BIAS_SD_PX = 0.2   # that bias's spread from totem to totem (pixels, 1 sd)
-AMBIGUITY_POWER = 4    # how a weaker edge along the outline counts against the chosen one
 ITERATIONS = 3         # re-measurements from the moved outline
 NEAR_ITERATIONS = 2    # the same from the mask's outline, for the edge nearest it
 REFINE_ITERATIONS = 2  # the same from the rim's strongest edge, ...
@@ -161,24 +160,6 @@ def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATION
     return x, cov + np.eye(3) * EDGE_BIAS_SD_PX ** 2
 
 
-def size_ambiguity(P0, R: float, K, grad, x, *, reach_px: float = rim.GROW_PX) -> float:
-    """Variance (pixels squared) of the outline's size from the other edges along it:
-    the whole outline's mean step at sizes ``x[2] + t`` (``|t| <= reach_px``); each local
-    peak other than the nearest to ``t = 0`` weighs ``(peak / top) ** AMBIGUITY_POWER``
-    and adds that share of ``t^2`` (the reflection band's inner edge, a shadow's)."""
-    ts = np.arange(-reach_px, reach_px + 1e-9, STEP_PX)
-    prof = np.array([rim.edge_score(rim._moved(P0, R, K, x + np.array([0, 0, t])), R, K,
-                                    grad) for t in ts])
-    inner = prof[1:-1]
-    idx = np.flatnonzero((inner >= prof[:-2]) & (inner > prof[2:])) + 1
-    if idx.size < 2 or prof.max() <= 0:
-        return 0.0
-    p = (prof[idx] / prof.max()) ** AMBIGUITY_POWER
-    near = np.argmin(np.abs(ts[idx]))
-    p[near] = max(p[near], 1.0)                 # the chosen edge counts as sure
-    return float((p * ts[idx] ** 2).sum() / p.sum())
-
-
 def _jacobian(P0, R, K, x, h=0.05) -> np.ndarray:
     """d centre / d x (3, 3), metres per pixel, by central differences."""
     return np.stack([(rim._moved(P0, R, K, x + h * e) - rim._moved(P0, R, K, x - h * e))
@@ -220,7 +201,6 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     # the photo right (its variance) or the mask right (then off by at most what the
     # photo saw, within the photo's own spread)
     post = w * S_p + (1 - w) * np.minimum(x_p ** 2, S_p) + shape2 + quant_px ** 2
-    post[2] += size_ambiguity(P_m, R, K, grad, x)
     J = _jacobian(P_m, R, K, x)
     C = J @ np.diag(post) @ J.T                               # centre covariance, m^2
     P = rim._moved(P_m, R, K, x)
