@@ -143,6 +143,9 @@ def move_of(P0, P, R: float, K) -> np.ndarray:
     return np.array([*(uv[1] - uv[0]), K[0, 0] * (half[1] - half[0])])
 
 
+_REACH = np.array([rim.SHIFT_PX, rim.SHIFT_PX, rim.GROW_PX])
+
+
 def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATIONS,
                window_px: float = WINDOW_PX):
     """The photo's nearest edge as a move ``x`` (3,) pixels of ``P0``'s outline (du, dv,
@@ -154,7 +157,7 @@ def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATION
         normals, off = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
                                     window_px=window_px)
         dx, cov = fit_offsets(normals, off - EDGE_BIAS_PX)
-        x = x + dx
+        x = np.clip(x + dx, -_REACH, _REACH)   # within the rim search's reach (READ_PX)
         if np.abs(dx).max() < 0.05:
             break
     return x, cov + np.eye(3) * EDGE_BIAS_SD_PX ** 2
