@@ -75,7 +75,7 @@ class FitSettings:
     pose_start: float = 0.5          # fraction of all steps before centres move
     density_init: float = -4.0       # raw density (softplus -> 0.018 per 1/100)
     erode_px: int = 1                # mask erosion: drop the blurred rim
-    pose_from: str = "photo"         # "photo": the rim's edges near each mask; "mask": its outline
+    pose_from: str = "both"          # mask and photo weighed; "photo" / "mask": overrides
     margin: float = 0.15
     near_factor: float = 0.5
     far_factor: float = 1000.0       # far plane: effectively at infinity
@@ -144,8 +144,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     ior = np.broadcast_to(np.asarray(scene.ior, float), (n_tot,)).copy()
 
     t0 = time.perf_counter()
-    initial, fixed_pose = _initial_pose(scene, K, radius, true_pose, fixed_pose,
-                                        settings.pose_from)
+    initial, fixed_pose, pose_sd = _initial_pose(scene, K, radius, true_pose, fixed_pose,
+                                                 settings.pose_from)
     t_pose = time.perf_counter() - t0
 
     pixels = totem_pixels(scene, K, settings.erode_px)
@@ -192,7 +192,7 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=model.history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene), geometry=geometry,
-                     rays=rays, ambient=[float(x) for x in ambient])
+                     rays=rays, ambient=[float(x) for x in ambient], pose_uncertainty=pose_sd)
 
 
 # --------------------------------------------------------------------------- stages
@@ -213,29 +213,25 @@ def _check_scene(scene: folder.Scene):
         raise BadInput("the key must give one radius and IoR per totem mask")
 
 
-def _initial_pose(scene, K, radius, true_pose, fixed_pose, pose_from: str = "photo"):
-    """The centres the fit starts from (n, 3) metres, and whether they stay fixed: the
-    oracle's (fixed), the scene's own ``initial_totem_pose.npy``, or the masks' (moved
-    to the rim's edges in the photo when ``pose_from`` is "photo", :mod:`inverse.rim`)."""
+def _initial_pose(scene, K, radius, true_pose, fixed_pose, pose_from: str = "both"):
+    """The centres the fit starts from (n, 3) metres, whether they stay fixed, and their
+    uncertainty (fit.json ``pose_uncertainty``, or None): the oracle's (fixed), the
+    scene's own ``initial_totem_pose.npy``, or the masks' and photo's
+    (:func:`inverse.pose_combined.initial_centres`)."""
     n_tot = scene.masks.shape[0]
     if true_pose is not None:
-        return np.asarray(true_pose, dtype=np.float64).reshape(n_tot, 3), True
+        return np.asarray(true_pose, dtype=np.float64).reshape(n_tot, 3), True, None
     if scene.initial_pose is not None:
-        return np.asarray(scene.initial_pose, dtype=np.float64), fixed_pose
-    from inverse.pose import initial_pose
-    if pose_from not in ("mask", "photo"):
-        raise BadInput(f"pose_from must be 'mask' or 'photo', got {pose_from!r}")
-    centers = initial_pose(scene.masks, K, radius)
-    if pose_from == "photo":
-        from inverse.rim import refine_centres
-        centers = refine_centres(scene.image, centers, radius, K)
-    return centers, fixed_pose
+        return np.asarray(scene.initial_pose, dtype=np.float64), fixed_pose, None
+    from inverse.pose_combined import initial_centres
+    centers, sd = initial_centres(scene.image, scene.masks, K, radius, pose_from)
+    return centers, fixed_pose, sd
 
 
 def _outline(scene, K, radius, initial, settings):
-    """The joint fit's pose term: towards the masks' outlines, or (``pose_from`` photo,
-    when the rims gave the initial centres) towards those centres' outlines."""
-    if settings.pose_from == "photo" and scene.initial_pose is None:
+    """The joint fit's pose term: towards the masks' outlines (``pose_from`` mask or a
+    given initial pose), else towards the initial centres' outlines."""
+    if settings.pose_from != "mask" and scene.initial_pose is None:
         from inverse.rim import outline
 
         uv = [outline(P, float(r), K)[0] for P, r in zip(initial, radius)]

@@ -48,6 +48,7 @@ class FitResult:
     geometry: dict = field(default_factory=dict)  # chosen geometry, hold-out errors
     ambient: list = field(default_factory=list)   # fitted linear RGB the glass reflects
     rays: TotemRays | None = None  # the totem pixels' rays leaving the glass
+    pose_uncertainty: list | None = None  # per totem {along_mm, across_mm, mask_share}
 
 
 def scene_fingerprint(scene: folder.Scene) -> str:
@@ -150,7 +151,7 @@ def write_fit(result: FitResult, out_dir, *, scene: folder.Scene | None = None) 
         "initial": np.asarray(result.initial).tolist(),
         "history": result.history, "timings": result.timings,
         "geometry": result.geometry, "ambient": list(result.ambient),
-        "settings": result.settings, "versions": backend.describe()})
+        "pose_uncertainty": result.pose_uncertainty, "settings": result.settings, "versions": backend.describe()})
 
 
 def load_fit(fit_dir) -> FitResult:
@@ -202,4 +203,5 @@ def load_fit(fit_dir) -> FitResult:
                      settings=meta.get("settings", {}),
                      scene_fingerprint=str(meta.get("scene_fingerprint", "")),
                      geometry=meta.get("geometry", {}), rays=rays,
-                     ambient=list(meta.get("ambient", [])))
+                     ambient=list(meta.get("ambient", [])),
+                     pose_uncertainty=meta.get("pose_uncertainty"))

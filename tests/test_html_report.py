@@ -204,6 +204,19 @@ def test_a_consistent_photo_says_so():
     assert "came closest" in words
 
 
+def test_each_totems_pose_uncertainty_is_shown_beside_it():
+    photo = texture()
+    fit = make_fit(photo)
+    fit.pose_uncertainty = [{"along_mm": 12.34 + j, "across_mm": 0.56, "mask_share": 1.0}
+                            for j in range(len(fit.centers))]
+    rep = report.verify_scene(make_scene(photo), fit, calibration=None)
+    assert rep.to_json()["totems"][1]["pose_sd_mm"] == [13.34, 0.56]
+    words = Page(html_report.render_report(rep, {})).words
+    assert "13.3 / 0.6" in words and "along / across the line of sight" in words
+    bare = report.verify_scene(make_scene(photo), make_fit(photo), calibration=None)
+    assert bare.to_json()["totems"][0]["pose_sd_mm"] is None
+
+
 def test_chances_in_words():
     assert html_report._chance(0.25) == "25 %"
     assert html_report._chance(0.01) == "1 %"

@@ -87,7 +87,7 @@ def _fit(args, scene):
         true_pose = truth.totem_pose
     from inverse.fit import FitSettings
 
-    settings = FitSettings(pose_from=getattr(args, "pose_from", "photo"))
+    settings = FitSettings(pose_from=getattr(args, "pose_from", "both"))
     result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
                        true_pose=true_pose, progress=_progress(args), settings=settings)
     fit_dir = _out_dir(args) / "fit"
@@ -250,10 +250,11 @@ def _fit_arguments(v, many: bool = False) -> None:
                    help="keep the totem centres at their initialisation")
     v.add_argument("--oracle-pose", action="store_true",
                    help="use truth/totem_pose.npy, fixed (synthetic scenes; benchmarks)")
-    v.add_argument("--pose-from", choices=("photo", "mask"), default="photo",
-                   help="the totems' initial pose from the rims' edges in the photo near "
-                        "each mask (default: masks as people draw them), or from the "
-                        "masks' own outlines (pixel-exact masks)")
+    v.add_argument("--pose-from", choices=("both", "photo", "mask"), default="both",
+                   help="the totems' initial pose from the mask and the photo's edges "
+                        "weighed by what each is worth (default), or, as an override, "
+                        "from the rims' strongest edges near each mask alone, or from the "
+                        "masks' own outlines alone")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -241,7 +241,8 @@ def _layers(report: Report, overlays: dict, data: dict) -> dict:
 def _totems(report: Report, data: dict) -> list[dict]:
     """Each totem's close-up (a data: URI or None) and its fitted pose in words: centre
     (camera frame) and distance from the camera in metres, shift from the initial pose
-    in millimetres, mask IoU."""
+    in millimetres, the initial pose's 1 sd along and across the line of sight in
+    millimetres, mask IoU."""
     out = []
     sil = report.silhouettes
     for j, t in enumerate(data["totems"]):
@@ -253,7 +254,9 @@ def _totems(report: Report, data: dict) -> list[dict]:
         out.append({"n": j + 1, "uri": None if pic is None else data_uri(pic),
                     "center": ", ".join(f"{x:.3f}" for x in c),
                     "distance": f"{np.linalg.norm(c):.2f}", "moved": _fmt(moved, ".1f"),
-                    "iou": _fmt(t["mask_iou"], ".3f")})
+                    "iou": _fmt(t["mask_iou"], ".3f"),
+                    "sd": "" if not t.get("pose_sd_mm") else
+                    "{:.1f} / {:.1f}".format(*t["pose_sd_mm"])})
     return out
 
 

@@ -141,6 +141,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     centers = np.asarray(fit.centers, dtype=np.float64)
     initial = getattr(fit, "initial", None)
     initial = None if initial is None else np.asarray(initial, dtype=np.float64)
+    unc = getattr(fit, "pose_uncertainty", None) or []
     for j, mask in enumerate(np.asarray(scene.masks, bool)):
         sil = sphere_silhouette(centers[j], float(scene.radius[j]), scene.K, (H, W))
         silhouettes.append(sil)
@@ -148,7 +149,9 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
             "center": [round(float(x), 6) for x in centers[j]],
             "initial": None if initial is None else [round(float(x), 6)
                                                      for x in initial[j]],
-            "mask_iou": round(mask_iou(mask, sil), 6)})
+            "mask_iou": round(mask_iou(mask, sil), 6),
+            "pose_sd_mm": [unc[j]["along_mm"], unc[j]["across_mm"]] if j < len(unc)
+            else None})
 
     timing = {f"fit_{k}": float(v) for k, v in (getattr(fit, "timings", None) or {}).items()
               if isinstance(v, (int, float)) and not isinstance(v, bool)}
