@@ -55,6 +55,7 @@ STEP_PX = 0.25         # the profile's sampling step along the normal (pixels)
 PEAK_FRACTION = 0.3    # a local peak counts when at least this fraction of its arc's top
 EDGE_BIAS_PX = -0.15   # where the nearest edge lies from the silhouette (pixels, outward)
 EDGE_BIAS_SD_PX = 0.2   # that bias's spread from totem to totem (pixels, 1 sd)
+EDGE_LATERAL_SD_PX = 0.5  # the nearest edge's sideways offset from totem to totem (1 sd)
 ITERATIONS = 3         # re-measurements from the moved outline
 NEAR_ITERATIONS = 2    # the same from the mask's outline, for the edge nearest it
 REFINE_ITERATIONS = 2  # the same from the rim's strongest edge, ...
@@ -144,6 +145,7 @@ def move_of(P0, P, R: float, K) -> np.ndarray:
 
 
 _REACH = np.array([rim.SHIFT_PX, rim.SHIFT_PX, rim.GROW_PX])
+_BIAS_SD = np.array([EDGE_LATERAL_SD_PX, EDGE_LATERAL_SD_PX, EDGE_BIAS_SD_PX])
 
 
 def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATIONS,
@@ -160,7 +162,7 @@ def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATION
         x = np.clip(x + dx, -_REACH, _REACH)   # within the rim search's reach (READ_PX)
         if np.abs(dx).max() < 0.05:
             break
-    return x, cov + np.eye(3) * EDGE_BIAS_SD_PX ** 2
+    return x, cov + np.diag(_BIAS_SD ** 2)
 
 
 def _jacobian(P0, R, K, x, h=0.05) -> np.ndarray:
