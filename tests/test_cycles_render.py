@@ -88,3 +88,28 @@ def test_sphere_mask_is_the_analytic_silhouette(rendered):
     assert exact.sum() > 300                                 # a sphere of some size
     outline = exact ^ np.roll(exact, 1, 0) | exact ^ np.roll(exact, 1, 1)
     assert (exact != cycles).sum() <= 0.02 * outline.sum(), (exact != cycles).sum()
+
+
+def test_small_set_is_scene_folders(tmp_path):
+    """make_cycles_set.py --small: an untouched folder every reader takes, with exact
+    masks, true centres that project into them, and edited copies whose totem pixels
+    are the untouched photo's."""
+    from scenes import folder
+
+    r = subprocess.run([str(ROOT / ".venv" / "bin" / "python"),
+                        str(ROOT / "benchmarks" / "cycles" / "make_cycles_set.py"),
+                        str(tmp_path), "--seed", "101", "--count", "1", "--small"],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    name = "cycles-yard-s101"
+    scene, truth = folder.read_scene(tmp_path / name), folder.read_truth(tmp_path / name)
+    assert truth.scene["renderer"] == "cycles" and "objects" not in truth.scene
+    assert truth.scene["cycles"]["mask_check"]["pixels_differing"] == [0] * scene.n_totems
+    uv = camera.project(scene.K, truth.totem_pose)
+    for m, (u, v) in zip(scene.masks, uv):            # each centre inside its own mask
+        assert m[int(round(v)), int(round(u))]
+    for kind in ("color", "splice", "remove"):
+        edited = folder.read_scene(tmp_path / f"{name}-{kind}")
+        totems = scene.masks.any(axis=0)
+        assert edited.manip_mask.any() and not (edited.manip_mask & totems).any()
+        assert np.array_equal(edited.image[totems], scene.image[totems])
