@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/cycles/make_cycles_set.py DIR [--seed N] [--count K]
         [--kind room|yard|table] [--small | --size WxH] [--samples S]
-        [--edits color,splice] [--no-remove]
+        [--edits color,splice] [--no-remove] [--view AgX|Filmic|Standard]
+        [--denoise on|off]
 
 For K seeds from N (a seed whose totems cannot be placed is skipped, and said so), it
 renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
@@ -46,6 +47,8 @@ def render(rdir: Path, seed: int, args) -> float:
     cmd += ["--small"] if args.small else ["--size", args.size]
     cmd += ["--kind", args.kind] if args.kind else []
     cmd += [] if args.no_remove else ["--remove"]
+    cmd += ["--view", args.view] if args.view else []
+    cmd += ["--denoise", args.denoise] if args.denoise else []
     rdir.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     with open(rdir / "render.log", "w") as log:
@@ -67,6 +70,10 @@ def main(argv=None) -> int:
     ap.add_argument("--edits", default="color,splice",
                     help="comma-separated totems tamper kinds (2D ones), or none")
     ap.add_argument("--no-remove", action="store_true")
+    ap.add_argument("--view", choices=design.VIEWS,
+                    help="every scene through this view transform (ablations)")
+    ap.add_argument("--denoise", choices=("on", "off"),
+                    help="the denoiser on or off for every scene (ablations)")
     a = ap.parse_args(argv)
     try:
         W, H = (160, 120) if a.small else (int(v) for v in a.size.lower().split("x"))

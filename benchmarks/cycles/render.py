@@ -2,7 +2,7 @@
 
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --seed N
         [--kind room|yard|table] [--size WxH | --small] [--samples N] [--remove]
-        [--linear]
+        [--linear] [--view AgX|Filmic|Standard] [--denoise on|off]
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --desc DESC.json [...]
 
 Writes OUT/: photo.png (the camera's photo: its view transform, denoiser and pixel
@@ -42,6 +42,10 @@ def main(argv=None) -> int:
     ap.add_argument("--remove", action="store_true",
                     help="also render without one object (for the camera's view)")
     ap.add_argument("--linear", action="store_true", help="also the scene-linear photo")
+    ap.add_argument("--view", choices=design.VIEWS,
+                    help="this view transform instead of the seed's (ablations)")
+    ap.add_argument("--denoise", choices=("on", "off"),
+                    help="the denoiser on or off instead of the seed's (ablations)")
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args(argv)
     W, H = (160, 120) if a.small else (int(v) for v in a.size.lower().split("x"))
@@ -51,6 +55,10 @@ def main(argv=None) -> int:
             desc = json.load(f)
     else:
         desc = design.describe(a.seed, kind=a.kind, size=(W, H), samples=samples)
+    if a.view:
+        desc["pipeline"]["view_transform"] = a.view
+    if a.denoise:
+        desc["pipeline"]["denoise"] = a.denoise == "on"
     os.makedirs(a.out, exist_ok=True)
     out = os.path.abspath(a.out)
     times = {}
