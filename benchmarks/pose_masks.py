@@ -71,7 +71,8 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             c = pose_combined.combine_centre(m, R[j], K, grad, j=j)
             rows.append((100 * np.linalg.norm(P_mask - P_true) / dist,
                          100 * np.linalg.norm(P_photo - P_true) / dist,
-                         100 * np.linalg.norm(c.center - P_true) / dist, covered(c, P_true),
+                         100 * np.linalg.norm(c.center - P_true) / dist,
+                         covered(c, P_true),
                          100 * c.sd_along / dist))
         out[name] = rows
     return out
@@ -84,7 +85,8 @@ def covered(c, P_true) -> float:
     los = c.center / np.linalg.norm(c.center)
     along = e @ los
     across2 = e @ e - along ** 2
-    chi2 = along ** 2 / max(c.sd_along, 1e-12) ** 2 + across2 / max(c.sd_across, 1e-12) ** 2
+    chi2 = along ** 2 / max(c.sd_along, 1e-12) ** 2 \
+        + across2 / max(c.sd_across, 1e-12) ** 2
     return float(chi2 <= 7.815)
 
 
@@ -120,7 +122,8 @@ def main(argv=None) -> int:
         if not ok.any():
             return f"| {name} | refused | refused | refused | | | 0 of {len(a)} |"
         b = a[ok]
-        cells = " | ".join(f"{np.median(b[:, k]):.2f} / {b[:, k].max():.2f}" for k in range(3))
+        cells = " | ".join(f"{np.median(b[:, k]):.2f} / {b[:, k].max():.2f}"
+                           for k in range(3))
         return (f"| {name} | {cells} | {100 * b[:, 3].mean():.0f} % | "
                 f"{np.median(b[:, 4]):.2f} | {ok.sum()} of {len(a)} |")
 

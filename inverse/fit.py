@@ -192,7 +192,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                      totem_points=totem_points, totem_pred=totem_pred, grid=grid,
                      history=model.history, timings=timings, settings=settings.to_dict(),
                      scene_fingerprint=scene_fingerprint(scene), geometry=geometry,
-                     rays=rays, ambient=[float(x) for x in ambient], pose_uncertainty=pose_sd)
+                     rays=rays, ambient=[float(x) for x in ambient],
+                     pose_uncertainty=pose_sd)
 
 
 # --------------------------------------------------------------------------- stages

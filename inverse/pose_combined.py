@@ -60,7 +60,7 @@ ITERATIONS = 3         # re-measurements from the moved outline
 NEAR_ITERATIONS = 2    # the same from the mask's outline, for the edge nearest it
 REFINE_ITERATIONS = 2  # the same from the rim's strongest edge, ...
 REFINE_WINDOW_PX = 1.0  # ... looking this far along each normal
-OUTER_PX = 0.5         # a rim edge this far outside the mask's nearest: the mask is inside
+OUTER_PX = 0.5         # the rim's edge this far outside the nearest: the mask is inside
 SHAPE_QUANT_PX = 0.25  # rms distance of a pixel-exact mask's outline from a smooth one
 TIGHT_PX = 0.3        # the arcs' edges agree on the outline's size to this (pixels, 1 sd)
 CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd
@@ -74,7 +74,7 @@ class CombinedPose:
     sd_along: float         # 1 sd of the centre along the line of sight
     sd_across: float        # 1 sd across it (each of the two lateral directions)
     mask_center: np.ndarray  # (3,) the mask's own pose
-    photo_move: np.ndarray  # (3,) x_p: the photo's edge minus the mask's outline (du, dv, g)
+    photo_move: np.ndarray  # (3,) x_p: the photo's edge less the mask's outline (du, dv, g)
     photo_cov: np.ndarray   # (3, 3) its covariance S_p
     mask_sd: np.ndarray     # (3,) s_m per component
     weight: np.ndarray      # (3,) w: 0 keeps the mask's outline, 1 takes the photo's
@@ -195,7 +195,7 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
         x_p, S = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
                             window_px=REFINE_WINDOW_PX)
     S_p = np.diag(S)
-    shape2 = max(shape_rms ** 2 - SHAPE_QUANT_PX ** 2, 0.0)   # beyond a pixel mask's steps
+    shape2 = max(shape_rms ** 2 - SHAPE_QUANT_PX ** 2, 0.0)  # beyond a pixel mask's steps
     if on_edge:               # the mask is off only where the photo says so beyond doubt
         s_m2 = np.maximum(x_p ** 2 - CONFIRM_SD ** 2 * S_p, 0.0)
     else:                     # off an edge: a drawn mask's slop, or what the photo saw
@@ -241,7 +241,8 @@ def uncertainty_record(c: CombinedPose) -> dict:
     """fit.json's ``pose_uncertainty`` entry of one totem: 1 sd along the line of sight
     and across it in millimetres, and the share of the outline's size taken from the
     mask (1: the mask's, 0: the photo's)."""
-    return {"along_mm": round(1e3 * c.sd_along, 2), "across_mm": round(1e3 * c.sd_across, 2),
+    return {"along_mm": round(1e3 * c.sd_along, 2),
+            "across_mm": round(1e3 * c.sd_across, 2),
             "mask_share": round(float(1.0 - c.weight[2]), 3)}
 
 
@@ -253,7 +254,8 @@ def initial_centres(image, masks, K, radius, pose_from: str = "both"):
     from scenes.errors import BadInput
 
     if pose_from not in POSE_FROM:
-        raise BadInput(f"pose_from must be one of {', '.join(POSE_FROM)}, got {pose_from!r}")
+        raise BadInput(f"pose_from must be one of {', '.join(POSE_FROM)}, "
+                       f"got {pose_from!r}")
     if pose_from == "both":
         poses = combined_poses(image, masks, K, radius)
         return np.stack([c.center for c in poses]), [uncertainty_record(c) for c in poses]

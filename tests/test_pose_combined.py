@@ -120,7 +120,8 @@ def _weighed(scene, family, seed=0):
         np.stack([drawn_masks.family(family, m, rng) for m in sc.masks])
     poses = pose_combined.combined_poses(sc.image, masks, sc.K, sc.radius)
     dist = np.linalg.norm(truth.totem_pose, axis=1)
-    err = np.array([np.linalg.norm(c.center - P) for c, P in zip(poses, truth.totem_pose)])
+    err = np.array([np.linalg.norm(c.center - P)
+                    for c, P in zip(poses, truth.totem_pose)])
     return poses, 100 * err / dist, masks
 
 
