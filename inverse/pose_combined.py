@@ -113,12 +113,13 @@ def fit_offsets(normals, offsets) -> tuple[np.ndarray, np.ndarray]:
     """``x = (du, dv, g)`` pixels from the arcs' offsets, ``o_a = n_a . (du, dv) + g``,
     by iteratively reweighted least squares (Tukey's biweight, scale from the median
     absolute residual), and its covariance (3, 3) pixels squared (the residuals' robust
-    scale, at least a quarter pixel, through the weighted design)."""
+    scale, at least a quarter pixel, through the weighted design; infinite when fewer
+    than four arcs have an edge)."""
     ok = np.isfinite(offsets)
     A = np.column_stack([normals[ok], np.ones(ok.sum())])
     o = offsets[ok]
     if len(o) < 4:
-        return np.zeros(3), np.diag([WINDOW_PX ** 2] * 3)
+        return np.zeros(3), np.diag([np.inf] * 3)          # no edge: no evidence
     w = np.ones(len(o))
     for _ in range(8):
         Aw = A * w[:, None]
@@ -154,11 +155,14 @@ def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATION
     g, the edge bias taken off) and its covariance (3, 3): measured from ``start`` (a
     move, default none), the outline moved there, measured again."""
     x = np.zeros(3) if start is None else np.asarray(start, np.float64).copy()
-    cov = np.diag([WINDOW_PX ** 2] * 3)
+    cov = np.diag([np.inf] * 3)
     for _ in range(iterations):
         normals, off = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
                                     window_px=window_px)
-        dx, cov = fit_offsets(normals, off - EDGE_BIAS_PX)
+        dx, found = fit_offsets(normals, off - EDGE_BIAS_PX)
+        if not np.all(np.isfinite(found)) and np.all(np.isfinite(cov)):
+            break             # no edge this time: keep the last measurement
+        cov = found
         x = np.clip(x + dx, -_REACH, _REACH)   # within the rim search's reach (READ_PX)
         if np.abs(dx).max() < 0.05:
             break
@@ -201,11 +205,14 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     else:                     # off an edge: a drawn mask's slop, or what the photo saw
         s_m2 = np.maximum(x_p ** 2, rim.MASK_SIGMA_PX ** 2)
     s_m2 = s_m2 + shape2 + quant_px ** 2
-    w = s_m2 / (s_m2 + S_p)
+    if np.all(np.isfinite(S_p)):
+        w = s_m2 / (s_m2 + S_p)
+        # the photo right (its variance) or the mask right (then off by at most what
+        # the photo saw, within the photo's own spread)
+        post = w * S_p + (1 - w) * np.minimum(x_p ** 2, S_p) + shape2 + quant_px ** 2
+    else:                     # no edge near the mask: its pose, as sure as a drawn one
+        w, post = np.zeros(3), s_m2
     x = w * x_p
-    # the photo right (its variance) or the mask right (then off by at most what the
-    # photo saw, within the photo's own spread)
-    post = w * S_p + (1 - w) * np.minimum(x_p ** 2, S_p) + shape2 + quant_px ** 2
     J = _jacobian(P_m, R, K, x)
     C = J @ np.diag(post) @ J.T                               # centre covariance, m^2
     P = rim._moved(P_m, R, K, x)

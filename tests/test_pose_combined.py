@@ -71,6 +71,15 @@ def test_the_uncertainty_covers_the_error_and_grows_with_a_shifted_mask():
         assert np.sqrt(max(e @ e - (e @ los) ** 2, 0)) <= 3 * c.sd_across
 
 
+def test_a_photo_without_edges_leaves_the_masks_pose_and_says_so():
+    _, mask = _disc(P0, R0)
+    flat = np.full((H, W, 3), 0.5, np.float32)
+    c = pose_combined.combined_poses(flat, mask[None], K, R0)[0]
+    np.testing.assert_allclose(c.center, c.mask_center)
+    sure = pose_combined.combined_poses(_disc(P0, R0)[0], mask[None], K, R0)[0]
+    assert c.sd_along > 5 * sure.sd_along and np.isfinite(c.sd_along)
+
+
 def test_the_outline_move_is_the_inverse_of_rims():
     from inverse import rim
 
