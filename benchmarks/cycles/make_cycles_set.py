@@ -17,7 +17,8 @@ renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
   _renders/s<seed>/               Cycles' own output (render.json, photo, ids...), kept;
                                   a render found there finished is not made again.
 
-Exit 2 with one line for bad arguments or a missing .venv-cycles.
+Exit 2 with one line for bad arguments or a missing .venv-cycles; 1 when a render fails
+(its log is in ``_renders/s<seed>/render.log``).
 """
 
 from __future__ import annotations
@@ -90,6 +91,9 @@ def main(argv=None) -> int:
         print(f"error: no {PY}: run `make cycles-env` first", file=sys.stderr)
         return 2
     out = Path(a.dir)
+    if out.exists() and not out.is_dir():
+        print(f"error: {out} is not a folder", file=sys.stderr)
+        return 2
     for seed in range(a.seed, a.seed + a.count):
         try:
             desc = design.describe(seed, kind=a.kind, size=(W, H))
@@ -98,7 +102,11 @@ def main(argv=None) -> int:
             continue
         name = f"cycles-{desc['kind']}-s{seed}"
         rdir = out / "_renders" / f"s{seed}"
-        secs = render(rdir, seed, a)
+        try:
+            secs = render(rdir, seed, a)
+        except RuntimeError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
         scene = out / name
         if not scene.exists():
             convert.write_untouched(rdir, scene)
