@@ -241,6 +241,7 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
     assert back.scene_fingerprint == fit_files.scene_fingerprint(scene)
+    assert back.pose_uncertainty is None                 # a given initial pose
     # The fitted colour the glass reflects is kept: linear RGB, non-negative.
     assert back.ambient == r.ambient and len(r.ambient) == 3
     assert min(r.ambient) >= 0.0 and max(r.ambient) > 0.0
@@ -297,6 +298,24 @@ def test_the_fingerprint_covers_the_band_the_rim_search_reads(small_scene):
         image[v, u] = 1.0 - image[v, u]
         got = fit_files.scene_fingerprint(dataclasses.replace(scene, image=image))
         assert (got == base) == same
+
+
+def test_the_default_pose_weighs_mask_and_photo_and_says_how_sure(small_scene):
+    # No given pose: the masks' and the photo's weighed (fit.json pose_uncertainty);
+    # the --pose-from overrides give none.
+    from inverse import fit
+
+    scene, truth = small_scene
+    scene = dataclasses.replace(scene, initial_pose=None)
+    K, R = np.asarray(scene.K), np.asarray(scene.radius, float)
+    centers, fixed, sd = fit._initial_pose(scene, K, R, None, False)
+    assert not fixed and len(sd) == len(truth)
+    assert all(s["along_mm"] > s["across_mm"] > 0 and 0 <= s["mask_share"] <= 1
+               for s in sd)
+    err = np.linalg.norm(centers - truth, axis=1) / np.linalg.norm(truth, axis=1)
+    assert err.max() < 0.02, err                     # exact masks, 160 x 120
+    for how in ("photo", "mask"):
+        assert fit._initial_pose(scene, K, R, None, False, how)[2] is None
 
 
 def test_load_fit_refuses_missing_or_corrupt(tmp_path):
