@@ -36,6 +36,7 @@ STAGES = [
     ("inverse.fit", "fit_scene"),
     ("inverse.fit", "_initial_pose"),
     ("inverse.pose", "initial_pose"),
+    ("inverse.pose_combined", "combined_poses"),
     ("inverse.rim", "refine_centres"),
     ("inverse.fit", "totem_pixels"),
     ("inverse.fit", "frame_for_scene"),
