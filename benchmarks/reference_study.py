@@ -1,0 +1,70 @@
+"""The verdict's statistic with its median reference (today's) and without (the top-k
+mean alone, monotone in every patch), and the fit's held-out totem error, per preset and
+placement, from a bench's runs (docs/decisions.md, "verdict: the median reference against
+none, resting totems, the held-out error").
+
+    python benchmarks/reference_study.py BENCH_OUT/bench.json
+
+Without the reference a metric's score is its score plus its median (report.json
+``scores``), so no run is verified again. Prints untouched photos over the line, AUC of
+colour patches and splices, and the edited photos that score below their untouched one.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+bench = json.loads(Path(sys.argv[1]).read_text())
+rows = []
+for r in bench["runs"]:
+    if r.get("status") != "ok" or r.get("mode") != "joint":
+        continue
+    vdir = Path(r["verify"])
+    rep = json.loads((vdir / "report.json").read_text())
+    fitdir = (vdir.parent.parent / f"{r['fit_from']}-joint" / "fit") if r.get("fit_from") else vdir.parent / "fit"
+    fj = json.loads((fitdir / "fit.json").read_text())
+    g = fj["geometry"]; h = g["holdout_L1"][g["chosen"]]
+    s = rep["scores"]
+    stat_med = rep["statistic"]
+    stat_abs = max((v["score"] + v["median"]) / v["threshold"] for v in s.values())
+    rows.append(dict(name=r["name"], preset=r["preset"], placement=r.get("placement"),
+                     kind=r["kind"], med=stat_med, abs=stat_abs, h=h,
+                     recon=rep["metrics"].get("recon_L1"),
+                     medians={m: v["median"] for m, v in s.items()}))
+
+def auc(neg, pos):
+    neg, pos = np.asarray(neg), np.asarray(pos)
+    if not len(neg) or not len(pos):
+        return float("nan")
+    return float(((pos[:, None] > neg[None]) + 0.5 * (pos[:, None] == neg[None])).mean())
+
+groups = sorted({(r["preset"], r["placement"]) for r in rows})
+print(f"{'preset':9s} {'placement':9s} n  FA(med) FA(abs)  h med/max    AUCcol med/abs  AUCspl med/abs")
+for key in groups + [("all", "all")]:
+    sel = [r for r in rows if key == ("all", "all") or (r["preset"], r["placement"]) == key]
+    un = [r for r in sel if r["kind"] == "none"]
+    out = []
+    for stat in ("med", "abs"):
+        out.append(sum(r[stat] > 1 for r in un))
+    hs = [r["h"] for r in un]
+    a = {k: [auc([r[st] for r in un], [r[st] for r in sel if r["kind"] == k]) for st in ("med", "abs")]
+         for k in ("color", "splice")}
+    print(f"{key[0]:9s} {key[1]:9s} {len(un):2d} {out[0]:5d} {out[1]:7d}   {np.median(hs):.3f}/{max(hs):.3f}"
+          f"   {a['color'][0]:.2f}/{a['color'][1]:.2f}   {a['splice'][0]:.2f}/{a['splice'][1]:.2f}")
+# edits that lowered a median (the forger's gain) and by how much the score
+un = {(r["preset"], r["placement"], r["name"].split("-")[1]): r for r in rows if r["kind"] == "none"}
+lower = []
+for r in rows:
+    if r["kind"] == "none":
+        continue
+    base = un.get((r["preset"], r["placement"], r["name"].split("-")[1]))
+    if base is None:
+        continue
+    for m, v in r["medians"].items():
+        if v > base["medians"].get(m, v) + 1e-4:
+            lower.append((r["name"], m, base["medians"][m], v))
+print(f"edited photos whose median rose (score lowered by it): {len(lower)} of {sum(r['kind'] != 'none' for r in rows)}")
+for x in lower[:12]:
+    print("  ", x)
