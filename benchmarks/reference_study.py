@@ -53,18 +53,17 @@ for key in groups + [("all", "all")]:
          for k in ("color", "splice")}
     print(f"{key[0]:9s} {key[1]:9s} {len(un):2d} {out[0]:5d} {out[1]:7d}   {np.median(hs):.3f}/{max(hs):.3f}"
           f"   {a['color'][0]:.2f}/{a['color'][1]:.2f}   {a['splice'][0]:.2f}/{a['splice'][1]:.2f}")
-# edits that lowered a median (the forger's gain) and by how much the score
-un = {(r["preset"], r["placement"], r["name"].split("-")[1]): r for r in rows if r["kind"] == "none"}
-lower = []
-for r in rows:
-    if r["kind"] == "none":
-        continue
-    base = un.get((r["preset"], r["placement"], r["name"].split("-")[1]))
-    if base is None:
-        continue
-    for m, v in r["medians"].items():
-        if v > base["medians"].get(m, v) + 1e-4:
-            lower.append((r["name"], m, base["medians"][m], v))
-print(f"edited photos whose median rose (score lowered by it): {len(lower)} of {sum(r['kind'] != 'none' for r in rows)}")
-for x in lower[:12]:
-    print("  ", x)
+# edited photos scoring below their own untouched photo (the forger's gain)
+untouched = {(r["preset"], r["placement"], r["name"].split("-")[1]): r
+             for r in rows if r["kind"] == "none"}
+edited = [r for r in rows if r["kind"] != "none"
+          and (r["preset"], r["placement"], r["name"].split("-")[1]) in untouched]
+for stat in ("med", "abs"):
+    below = [(r["name"], round(r[stat], 3),
+              round(untouched[(r["preset"], r["placement"], r["name"].split("-")[1])][stat], 3))
+             for r in edited
+             if r[stat] < untouched[(r["preset"], r["placement"], r["name"].split("-")[1])][stat]]
+    print(f"{stat}: edited photos below their untouched photo {len(below)} of {len(edited)}; "
+          f"caught at the line {sum(r[stat] > 1 for r in edited)}")
+    for x in below:
+        print("   ", *x)
