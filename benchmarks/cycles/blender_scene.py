@@ -64,29 +64,26 @@ def material(name: str, spec: dict):
     return mat
 
 
-def _glass(ior: float):
-    mat = bpy.data.materials.new("totem_glass")
+def _one_shader(name: str, node: str, output: str, **inputs):
+    """A material of one shader node (``node``, its ``inputs`` set) into the output."""
+    mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     nodes = mat.node_tree.nodes
     nodes.remove(nodes["Principled BSDF"])
-    glass = nodes.new("ShaderNodeBsdfGlass")
-    glass.inputs["IOR"].default_value = ior
-    glass.inputs["Roughness"].default_value = 0.0
-    mat.node_tree.links.new(glass.outputs["BSDF"],
+    shader = nodes.new(node)
+    for key, value in inputs.items():
+        shader.inputs[key].default_value = value
+    mat.node_tree.links.new(shader.outputs[output],
                             nodes["Material Output"].inputs["Surface"])
     return mat
+
+
+def _glass(ior: float):
+    return _one_shader("totem_glass", "ShaderNodeBsdfGlass", "BSDF", IOR=ior, Roughness=0.0)
 
 
 def _emitter(strength: float):
-    mat = bpy.data.materials.new("marker")
-    mat.use_nodes = True
-    nodes = mat.node_tree.nodes
-    nodes.remove(nodes["Principled BSDF"])
-    em = nodes.new("ShaderNodeEmission")
-    em.inputs["Strength"].default_value = strength
-    mat.node_tree.links.new(em.outputs["Emission"],
-                            nodes["Material Output"].inputs["Surface"])
-    return mat
+    return _one_shader("marker", "ShaderNodeEmission", "Emission", Strength=strength)
 
 
 def sphere(name: str, centre, radius: float, mat, index: int):

@@ -25,6 +25,20 @@ TEXTURES = ("checker", "noise", "brick", "wave", "voronoi", "magic", "plain")
 VIEWS = ("AgX", "Filmic", "Standard")
 
 
+def scene_options(ap) -> None:
+    """The options that choose and draw a scene, shared by ``render.py`` and
+    ``make_cycles_set.py``."""
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--kind", choices=KINDS)
+    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--small", action="store_true", help="160x120, 16 samples (tests)")
+    ap.add_argument("--samples", type=int, default=96)
+    ap.add_argument("--view", choices=VIEWS,
+                    help="this view transform instead of each scene's own (ablations)")
+    ap.add_argument("--denoise", choices=("on", "off"),
+                    help="the denoiser on or off instead of each scene's own (ablations)")
+
+
 def _colour(rng, lo=0.05, hi=0.85) -> list:
     return [float(c) for c in rng.uniform(lo, hi, 3)]
 

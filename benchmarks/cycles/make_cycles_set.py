@@ -62,19 +62,11 @@ def render(rdir: Path, seed: int, args) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("dir")
-    ap.add_argument("--seed", type=int, default=1)
+    design.scene_options(ap)
     ap.add_argument("--count", type=int, default=1)
-    ap.add_argument("--kind", choices=design.KINDS)
-    ap.add_argument("--size", default="640x480")
-    ap.add_argument("--small", action="store_true", help="160x120, 16 samples (tests)")
-    ap.add_argument("--samples", type=int, default=96)
     ap.add_argument("--edits", default="color,splice",
                     help="comma-separated totems tamper kinds (2D ones), or none")
     ap.add_argument("--no-remove", action="store_true")
-    ap.add_argument("--view", choices=design.VIEWS,
-                    help="every scene through this view transform (ablations)")
-    ap.add_argument("--denoise", choices=("on", "off"),
-                    help="the denoiser on or off for every scene (ablations)")
     a = ap.parse_args(argv)
     try:
         W, H = (160, 120) if a.small else (int(v) for v in a.size.lower().split("x"))

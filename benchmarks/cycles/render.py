@@ -33,19 +33,11 @@ import design  # noqa: E402
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("out")
-    ap.add_argument("--seed", type=int, default=1)
+    design.scene_options(ap)
     ap.add_argument("--desc", help="a description (JSON), not one drawn from --seed")
-    ap.add_argument("--kind", choices=design.KINDS)
-    ap.add_argument("--size", default="640x480")
-    ap.add_argument("--small", action="store_true", help="160x120, 16 samples (tests)")
-    ap.add_argument("--samples", type=int, default=96)
     ap.add_argument("--remove", action="store_true",
                     help="also render without one object (for the camera's view)")
     ap.add_argument("--linear", action="store_true", help="also the scene-linear photo")
-    ap.add_argument("--view", choices=design.VIEWS,
-                    help="this view transform instead of the seed's (ablations)")
-    ap.add_argument("--denoise", choices=("on", "off"),
-                    help="the denoiser on or off instead of the seed's (ablations)")
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args(argv)
     W, H = (160, 120) if a.small else (int(v) for v in a.size.lower().split("x"))
