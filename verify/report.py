@@ -137,21 +137,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
             metrics["pose_L1"] = float(np.abs(np.asarray(fit.centers, float) - true_pose)
                                        .sum(axis=1).mean())
 
-    totems, silhouettes = [], []
-    centers = np.asarray(fit.centers, dtype=np.float64)
-    initial = getattr(fit, "initial", None)
-    initial = None if initial is None else np.asarray(initial, dtype=np.float64)
-    unc = getattr(fit, "pose_uncertainty", None) or []
-    for j, mask in enumerate(np.asarray(scene.masks, bool)):
-        sil = sphere_silhouette(centers[j], float(scene.radius[j]), scene.K, (H, W))
-        silhouettes.append(sil)
-        totems.append({
-            "center": [round(float(x), 6) for x in centers[j]],
-            "initial": None if initial is None else [round(float(x), 6)
-                                                     for x in initial[j]],
-            "mask_iou": round(mask_iou(mask, sil), 6),
-            "pose_sd_mm": [unc[j]["along_mm"], unc[j]["across_mm"]] if j < len(unc)
-            else None})
+    totems, silhouettes = _totems(scene, fit)
 
     timing = {f"fit_{k}": float(v) for k, v in (getattr(fit, "timings", None) or {}).items()
               if isinstance(v, (int, float)) and not isinstance(v, bool)}
@@ -166,6 +152,28 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1))
+
+
+def _totems(scene: folder.Scene, fit) -> tuple[list, list]:
+    """report.json's ``totems`` (centre, initial centre, mask_iou, pose_sd_mm along and
+    across the line of sight) and each fitted sphere's silhouette (H, W) bool."""
+    H, W = np.asarray(scene.image).shape[:2]
+    centers = np.asarray(fit.centers, dtype=np.float64)
+    initial = getattr(fit, "initial", None)
+    initial = None if initial is None else np.asarray(initial, dtype=np.float64)
+    unc = getattr(fit, "pose_uncertainty", None) or []
+    totems, silhouettes = [], []
+    for j, mask in enumerate(np.asarray(scene.masks, bool)):
+        sil = sphere_silhouette(centers[j], float(scene.radius[j]), scene.K, (H, W))
+        silhouettes.append(sil)
+        totems.append({
+            "center": [round(float(x), 6) for x in centers[j]],
+            "initial": None if initial is None else [round(float(x), 6)
+                                                     for x in initial[j]],
+            "mask_iou": round(mask_iou(mask, sil), 6),
+            "pose_sd_mm": [unc[j]["along_mm"], unc[j]["across_mm"]] if j < len(unc)
+            else None})
+    return totems, silhouettes
 
 
 def _skipped(decision, n_totems: int) -> dict:
