@@ -2,6 +2,7 @@
 
     python benchmarks/make_set.py OUT --set development|calibration|benchmark
         [--jobs N] [--dry-run] [--small] [--presets P,..] [--kinds K,..] [--channels C,..]
+        [--cycles]
     python benchmarks/make_set.py OUT [--small] [--seeds N] [--first-seed S]
         [--totems-study] [--presets box,envmap] [--kinds K,..] [--jobs N] [--dry-run]
 
@@ -16,7 +17,9 @@ Existing folders are kept (each is written under a temporary name and renamed wh
 complete), so an interrupted build resumes. --jobs N: the scenes are made, then
 tampered, then recaptured, N at a time in separate processes (renders are
 deterministic per seed, so the order does not matter). --dry-run: what is left to
-make and how long it would take here (``SECONDS``).
+make and how long it would take here (``SECONDS``). --cycles: also the set's scenes
+rendered by Blender's Cycles (``sets.CYCLES``; ``make cycles-env`` first), OUT/cycles-
+<kind>-s<seed>[-<edit>|-remove]/, by ``benchmarks/cycles/make_cycles_set.py``.
 """
 
 from __future__ import annotations
@@ -183,6 +186,28 @@ def build(out: Path, photos, *, size, jobs: int = 1, spp=None) -> list[Path]:
     return [out / p.name for p in photos if (out / p.name).exists()]
 
 
+CYCLES_SECONDS = 240.0     # a Cycles scene with its removal at 640x480 here (150-363 s)
+
+
+def cycles_command(out: Path, set_name: str, *, small: bool = False) -> list[str]:
+    """The arguments of ``benchmarks/cycles/make_cycles_set.py`` that build the Cycles
+    scenes of ``set_name`` in ``out`` (with --small its first 2 seeds, 160x120)."""
+    seeds, edits, remove = sets.CYCLES[set_name]
+    count = min(2, len(seeds)) if small else len(seeds)
+    return [str(out), "--seed", str(seeds.start), "--count", str(count),
+            "--edits", ",".join(edits) or "none", *([] if remove else ["--no-remove"]),
+            *(["--small"] if small else [])]
+
+
+def build_cycles(out: Path, set_name: str, *, small: bool) -> int:
+    """Run make_cycles_set.py for the set's Cycles scenes; its exit code."""
+    import subprocess
+
+    script = Path(__file__).with_name("cycles") / "make_cycles_set.py"
+    return subprocess.run([sys.executable, str(script),
+                           *cycles_command(out, set_name, small=small)]).returncode
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("out", type=Path)
@@ -199,7 +224,11 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=1, help="processes at a time (default 1)")
     p.add_argument("--dry-run", action="store_true",
                    help="print what is left to make and how long it would take here")
+    p.add_argument("--cycles", action="store_true",
+                   help="also the set's Cycles-rendered scenes (needs make cycles-env)")
     args = p.parse_args(argv)
+    if args.cycles and args.set is None:
+        p.error("--cycles needs --set")
     size = (320, 240) if args.small else (640, 480)
     photos = _photos(p, args)
     todo = tasks(photos, args.out)
@@ -207,11 +236,15 @@ def main(argv=None) -> int:
     est = estimate_s(todo, size=size, jobs=args.jobs)
     print(f"{len(photos)} photos ({args.set or 'standard set'}, {size[0]}x{size[1]}): "
           f"{counts}; about {est / 60:.0f} min here with --jobs {args.jobs}", flush=True)
+    if args.cycles:
+        n = int(cycles_command(args.out, args.set, small=args.small)[4])
+        print(f"and {n} Cycles scenes: at most {n * CYCLES_SECONDS / 60:.0f} min here "
+              f"(a scene found rendered is not made again)", flush=True)
     if args.dry_run:
         return 0
     made = build(args.out, photos, size=size, jobs=args.jobs)
     print(f"{len(made)} scene folders in {args.out}")
-    return 0
+    return build_cycles(args.out, args.set, small=args.small) if args.cycles else 0
 
 
 def _split(text) -> list | None:

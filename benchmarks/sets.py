@@ -17,7 +17,9 @@ runs when this module is imported. A photo is named ``<preset>-<seed>`` (the unt
 scene), ``-<n>totems`` for the totems study, ``-resting`` for totems resting on the floor
 or ground (``RESTING``: box, outdoor, window), ``-<kind>`` when manipulated and
 ``+<channel>`` when recaptured (``totems recapture``); the pristine photos keep the
-standard set's names. Channels are :class:`scenes.channel.Channel` settings.
+standard set's names. Channels are :class:`scenes.channel.Channel` settings. Each set
+also holds scenes rendered by Blender's Cycles on seeds of its own (``CYCLES``;
+``make_set.py --cycles`` builds them, pristine, through ``benchmarks/cycles/``).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from dataclasses import dataclass
 from scenes.presets import PRESETS
 from scenes.tamper import KINDS
 
-__all__ = ["CHANNELS", "SEEDS", "RESERVED", "Recipe", "RECIPES", "Photo", "SETS",
+__all__ = ["CHANNELS", "SEEDS", "CYCLES", "RESERVED", "Recipe", "RECIPES", "Photo", "SETS",
            "check_disjoint", "photos"]
 
 UNTOUCHED = "none"
@@ -49,6 +51,14 @@ SEEDS = {
     "development": {p: range(31, 36) for p in PRESETS},
     "calibration": {p: range(11, 19) for p in PRESETS},
     "benchmark": {p: range(1, 6) for p in PRESETS},
+}
+# set -> the seeds of its Cycles-rendered scenes (benchmarks/cycles/; one scene a seed,
+# its kind drawn from the seed), their 2D edits and whether a removal is rendered.
+# Seeds 101-111 were looked at while the generator was built: development's.
+CYCLES = {
+    "development": (range(101, 112), ("color", "splice"), True),
+    "calibration": (range(201, 209), (), False),
+    "benchmark": (range(301, 306), ("color", "splice"), True),
 }
 # seeds used before the sets existed, kept out of every set
 RESERVED = {"validation of the thresholds (README, 2026-12)":
@@ -132,8 +142,10 @@ class Photo:
 
 def check_disjoint(seeds=None, reserved=None) -> None:
     """Raise ValueError when a preset's seed lies in two sets (or a set and
-    ``RESERVED``), naming them."""
-    groups = dict(SEEDS if seeds is None else seeds)
+    ``RESERVED``), naming them; the Cycles scenes count as the preset "cycles"."""
+    groups = {name: {**by_preset, **({"cycles": CYCLES[name][0]} if name in CYCLES
+                                     and seeds is None else {})}
+              for name, by_preset in (SEEDS if seeds is None else seeds).items()}
     groups.update(RESERVED if reserved is None else reserved)
     owner: dict = {}
     for group, by_preset in groups.items():

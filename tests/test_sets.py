@@ -80,3 +80,20 @@ def test_standard_set_and_options_as_before(capsys, tmp_path):
     assert "(calibration, 320x240): 2 to make, 0 to tamper, 4 to recapture" in out
     with pytest.raises(SystemExit):
         make_set.main([str(tmp_path), "--set", "benchmark", "--seeds", "3"])
+
+
+def test_each_sets_cycles_scenes_are_its_own():
+    """Cycles seeds are disjoint across sets (as a preset of their own), and
+    make_set.py --cycles asks make_cycles_set.py for exactly the set's seeds."""
+    sets.check_disjoint()
+    with pytest.raises(ValueError, match="cycles seed 5"):
+        sets.check_disjoint({"a": {"cycles": range(1, 6)}, "b": {"cycles": range(5, 9)}},
+                            {})
+    for name, (seeds, edits, remove) in sets.CYCLES.items():
+        argv = make_set.cycles_command(Path("out"), name)
+        assert argv[:5] == ["out", "--seed", str(seeds.start), "--count", str(len(seeds))]
+        assert argv[argv.index("--edits") + 1] == (",".join(edits) or "none")
+        assert ("--no-remove" in argv) is (not remove)
+    assert len(sets.CYCLES["benchmark"][0]) >= 5 and len(sets.CYCLES["calibration"][0]) >= 5
+    small = make_set.cycles_command(Path("o"), "benchmark", small=True)
+    assert small[4] == "2" and small[-1] == "--small"
