@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["intrinsics", "scale_intrinsics", "project", "pixel_rays", "mitsuba_sensor"]
+__all__ = ["intrinsics", "scale_intrinsics", "project", "pixel_rays", "sphere_silhouette",
+           "mitsuba_sensor"]
 
 
 def intrinsics(width: int, height: int, fov_x_deg: float) -> np.ndarray:
@@ -55,6 +56,25 @@ def pixel_rays(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     uv1 = np.stack([np.asarray(u, float), np.asarray(v, float), np.ones(np.shape(u))], -1)
     d = uv1 @ Kinv.T
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def sphere_silhouette(center, radius: float, K: np.ndarray,
+                      shape: tuple[int, int]) -> np.ndarray:
+    """Pixels covered by a sphere's image: (H, W) bool.
+
+    A pixel is inside when its centre's ray makes an angle < asin(R / |P|) with the
+    direction of the centre P (camera frame, metres); the whole image when the camera
+    is inside the sphere.
+    """
+    H, W = shape
+    P = np.asarray(center, dtype=np.float64)
+    dist = np.linalg.norm(P)
+    if dist <= radius:
+        return np.ones((H, W), bool)
+    v, u = np.mgrid[0:H, 0:W]
+    d = pixel_rays(K, u, v)
+    cos_half = np.sqrt(1.0 - (radius / dist) ** 2)
+    return d @ (P / dist) > cos_half
 
 
 def mitsuba_sensor(K: np.ndarray, width: int, height: int, spp: int = 16,

@@ -16,6 +16,7 @@ import numpy as np
 
 from inverse.grid import FrustumFrame
 from scenes import folder
+from scenes.camera import sphere_silhouette
 from scenes.errors import BadInput
 from verify import absence, corroborate, html_report, patches, region, resolution
 from verify import verdict as verdict_mod
@@ -35,26 +36,6 @@ the cold colours instead of having its noise stretched to red.
 
 
 # --------------------------------------------------------------------------- geometry
-
-def sphere_silhouette(center: np.ndarray, radius: float, K: np.ndarray,
-                      shape: tuple[int, int]) -> np.ndarray:
-    """Pixels covered by a sphere's image: (H, W) bool.
-
-    A pixel is inside when its ray makes an angle < asin(R / |P|) with the direction
-    of the centre P (camera frame, metres); the whole image when the camera is inside.
-    """
-    from scenes.camera import pixel_rays
-
-    H, W = shape
-    P = np.asarray(center, dtype=np.float64)
-    dist = np.linalg.norm(P)
-    if dist <= radius:
-        return np.ones((H, W), bool)
-    v, u = np.mgrid[0:H, 0:W]
-    d = pixel_rays(K, u, v)
-    cos_half = np.sqrt(1.0 - (radius / dist) ** 2)
-    return d @ (P / dist) > cos_half
-
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
     """Intersection over union of two (H, W) bool masks (0 when both are empty)."""

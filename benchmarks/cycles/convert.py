@@ -23,16 +23,11 @@ __all__ = ["sphere_masks", "read_render", "write_untouched", "write_removed"]
 
 
 def sphere_masks(K, centres, radius, shape) -> np.ndarray:
-    """(n, H, W) bool: pixel (u, v)'s centre ray meets sphere j (camera frame, metres)
-    in front of the camera: |P|^2 - (d . P)^2 < R^2 and d . P > 0, d the unit ray."""
-    H, W = shape
-    v, u = np.mgrid[0:H, 0:W]
-    d = camera.pixel_rays(K, u.astype(float), v.astype(float))
-    out = []
-    for P, R in zip(np.asarray(centres, float), np.broadcast_to(radius, (len(centres),))):
-        along = d @ P
-        out.append((P @ P - along**2 < R * R) & (along > 0))
-    return np.stack(out)
+    """(n, H, W) bool: each sphere's silhouette at pixel centres (camera frame, metres;
+    :func:`scenes.camera.sphere_silhouette`)."""
+    radii = np.broadcast_to(radius, (len(centres),))
+    return np.stack([camera.sphere_silhouette(P, float(R), K, shape)
+                     for P, R in zip(np.asarray(centres, float), radii)])
 
 
 def read_render(render_dir) -> dict:
