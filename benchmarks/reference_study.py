@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from roc import auc
+
 bench = json.loads(Path(sys.argv[1]).read_text())
 rows = []
 for r in bench["runs"]:
@@ -23,9 +25,10 @@ for r in bench["runs"]:
         continue
     vdir = Path(r["verify"])
     rep = json.loads((vdir / "report.json").read_text())
-    fitdir = (vdir.parent.parent / f"{r['fit_from']}-joint" / "fit") if r.get("fit_from") else vdir.parent / "fit"
-    fj = json.loads((fitdir / "fit.json").read_text())
-    g = fj["geometry"]; h = g["holdout_L1"][g["chosen"]]
+    leader = vdir.parent.parent / f"{r['fit_from']}-joint" if r.get("fit_from") \
+        else vdir.parent                       # the run whose fit this one reuses
+    geometry = json.loads((leader / "fit" / "fit.json").read_text())["geometry"]
+    h = geometry["holdout_L1"][geometry["chosen"]]
     s = rep["scores"]
     stat_med = rep["statistic"]
     stat_abs = max((v["score"] + v["median"]) / v["threshold"] for v in s.values())
@@ -33,12 +36,6 @@ for r in bench["runs"]:
                      kind=r["kind"], med=stat_med, abs=stat_abs, h=h,
                      recon=rep["metrics"].get("recon_L1"),
                      medians={m: v["median"] for m, v in s.items()}))
-
-def auc(neg, pos):
-    neg, pos = np.asarray(neg), np.asarray(pos)
-    if not len(neg) or not len(pos):
-        return float("nan")
-    return float(((pos[:, None] > neg[None]) + 0.5 * (pos[:, None] == neg[None])).mean())
 
 groups = sorted({(r["preset"], r["placement"]) for r in rows})
 print(f"{'preset':9s} {'placement':9s} n  FA(med) FA(abs)  h med/max    AUCcol med/abs  AUCspl med/abs")
