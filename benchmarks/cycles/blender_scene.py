@@ -78,8 +78,12 @@ def _one_shader(name: str, node: str, output: str, **inputs):
     return mat
 
 
-def _glass(ior: float):
-    return _one_shader("totem_glass", "ShaderNodeBsdfGlass", "BSDF", IOR=ior, Roughness=0.0)
+def _glass(ior: float, kind: str = "glass"):
+    """The totems' sharp dielectric: Cycles' Glass BSDF (Fresnel-weighted reflection and
+    refraction), or with ``kind`` "refraction" the Refraction BSDF alone (no reflection
+    of the environment, the transmitted light not dimmed by Fresnel; ablations)."""
+    node = {"glass": "ShaderNodeBsdfGlass", "refraction": "ShaderNodeBsdfRefraction"}[kind]
+    return _one_shader("totem_glass", node, "BSDF", IOR=ior, Roughness=0.0)
 
 
 def _emitter(strength: float):
@@ -222,9 +226,12 @@ def build(desc: dict, threads: int = 2) -> dict:
             for y in (0.5, 2.9):
                 _box("table_leg", (x, y, (z0 - 0.04) / 2), (0.06, 0.06, z0 - 0.04), top)
     objects = [_primitive(o, i + 1, z0) for i, o in enumerate(desc.get("objects", []))]
-    glass = _glass(desc["key"]["ior"])
+    glass = _glass(desc["key"]["ior"], desc.get("glass", "glass"))
     totems = [sphere(f"totem_{j}", t["centre"], desc["key"]["radius"], glass,
                      TOTEM_INDEX + j) for j, t in enumerate(desc["totems"])]
+    if not desc.get("totem_shadows", True):       # no shadow, no caustic (ablations)
+        for t in totems:
+            t.visible_shadow = t.visible_diffuse = False
     markers = [sphere(f"marker_{j}", m["centre"], m["radius"], _emitter(m["strength"]),
                       MARKER_INDEX + j) for j, m in enumerate(desc.get("markers", []))]
     return {"objects": objects, "totems": totems, "markers": markers}

@@ -16,13 +16,15 @@ try:                                     # run as a script inside .venv-cycles
 except ImportError:                      # imported from the package's venv
     from benchmarks.cycles import blender_camera as bc
 
-__all__ = ["KINDS", "HDRIS", "describe"]
+__all__ = ["KINDS", "HDRIS", "describe", "ablate"]
 
 KINDS = ("room", "yard", "table")
 HDRIS = ("courtyard", "forest", "city", "sunset", "sunrise", "interior", "studio")
 SHAPES = ("cube", "cylinder", "cone", "torus", "ico", "monkey")
 TEXTURES = ("checker", "noise", "brick", "wave", "voronoi", "magic", "plain")
 VIEWS = ("AgX", "Filmic", "Standard")
+FILTERS = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
+GLASSES = ("glass", "refraction")
 
 
 def scene_options(ap) -> None:
@@ -37,6 +39,38 @@ def scene_options(ap) -> None:
                     help="this view transform instead of each scene's own (ablations)")
     ap.add_argument("--denoise", choices=("on", "off"),
                     help="the denoiser on or off instead of each scene's own (ablations)")
+    ap.add_argument("--filter", choices=FILTERS,
+                    help="this pixel filter instead of each scene's own (ablations)")
+    ap.add_argument("--filter-width", type=float,
+                    help="the pixel filter's width in pixels (ablations)")
+    ap.add_argument("--glass", choices=GLASSES,
+                    help="the totems' BSDF: Cycles' Glass (reflects and refracts; the "
+                         "default) or Refraction alone (no reflection; ablations)")
+    ap.add_argument("--totem-shadows", choices=("on", "off"),
+                    help="off: the totems hidden from shadow and diffuse rays, so they "
+                         "cast no shadow and no caustic (ablations; default on)")
+
+
+def ablate(desc: dict, a) -> dict:
+    """``desc`` with the ablation options of :func:`scene_options` that ``a`` sets
+    (the others leave it as drawn): a new dict, ``desc`` untouched."""
+    d = dict(desc, pipeline=dict(desc["pipeline"]))
+    p = d["pipeline"]
+    if getattr(a, "view", None):
+        p["view_transform"] = a.view
+    if getattr(a, "denoise", None):
+        p["denoise"] = a.denoise == "on"
+    if getattr(a, "filter", None):
+        p["filter"] = a.filter
+    if getattr(a, "filter_width", None) is not None:
+        if not a.filter_width > 0:
+            raise ValueError(f"--filter-width must be > 0 px, got {a.filter_width}")
+        p["filter_width"] = float(a.filter_width)
+    if getattr(a, "glass", None):
+        d["glass"] = a.glass
+    if getattr(a, "totem_shadows", None):
+        d["totem_shadows"] = a.totem_shadows == "on"
+    return d
 
 
 def _colour(rng, lo=0.05, hi=0.85) -> list:

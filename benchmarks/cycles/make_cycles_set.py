@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/cycles/make_cycles_set.py DIR [--seed N] [--count K]
         [--kind room|yard|table] [--small | --size WxH] [--samples S]
         [--edits color,splice] [--no-remove] [--view AgX|Filmic|Standard]
-        [--denoise on|off]
+        [--denoise on|off] [--filter BOX|GAUSSIAN|BLACKMAN_HARRIS] [--filter-width PX]
+        [--glass glass|refraction] [--totem-shadows on|off]
 
 For K seeds from N (a seed whose totems cannot be placed is skipped, and said so), it
 renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
@@ -50,6 +51,10 @@ def render(rdir: Path, seed: int, args) -> float:
     cmd += [] if args.no_remove else ["--remove"]
     cmd += ["--view", args.view] if args.view else []
     cmd += ["--denoise", args.denoise] if args.denoise else []
+    cmd += ["--filter", args.filter] if args.filter else []
+    cmd += ["--filter-width", str(args.filter_width)] if args.filter_width else []
+    cmd += ["--glass", args.glass] if args.glass else []
+    cmd += ["--totem-shadows", args.totem_shadows] if args.totem_shadows else []
     rdir.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     with open(rdir / "render.log", "w") as log:
@@ -75,6 +80,10 @@ def main(argv=None) -> int:
         return 2
     edits = [] if a.edits in ("", "none") else a.edits.split(",")
     bad = [e for e in edits if e not in ("color", "splice", "inpaint")]
+    if a.filter_width is not None and not a.filter_width > 0:
+        print(f"error: --filter-width must be > 0 px, got {a.filter_width}",
+              file=sys.stderr)
+        return 2
     if bad or a.count < 1:
         print(f"error: edits must be color, splice or inpaint (got {bad}); count >= 1",
               file=sys.stderr)

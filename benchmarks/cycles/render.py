@@ -2,7 +2,9 @@
 
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --seed N
         [--kind room|yard|table] [--size WxH | --small] [--samples N] [--remove]
-        [--linear] [--view AgX|Filmic|Standard] [--denoise on|off]
+        [--linear] [--no-clean] [--view AgX|Filmic|Standard] [--denoise on|off]
+        [--filter BOX|GAUSSIAN|BLACKMAN_HARRIS] [--filter-width PX]
+        [--glass glass|refraction] [--totem-shadows on|off]
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --desc DESC.json [...]
 
 Writes OUT/: photo.png (the camera's photo: its view transform, denoiser and pixel
@@ -38,6 +40,9 @@ def main(argv=None) -> int:
     ap.add_argument("--remove", action="store_true",
                     help="also render without one object (for the camera's view)")
     ap.add_argument("--linear", action="store_true", help="also the scene-linear photo")
+    ap.add_argument("--no-clean", action="store_true",
+                    help="no clean.png (an ablation of the totems alone, whose clean "
+                         "view is the unablated render's)")
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args(argv)
     W, H = (160, 120) if a.small else (int(v) for v in a.size.lower().split("x"))
@@ -47,10 +52,7 @@ def main(argv=None) -> int:
             desc = json.load(f)
     else:
         desc = design.describe(a.seed, kind=a.kind, size=(W, H), samples=samples)
-    if a.view:
-        desc["pipeline"]["view_transform"] = a.view
-    if a.denoise:
-        desc["pipeline"]["denoise"] = a.denoise == "on"
+    desc = design.ablate(desc, a)
     os.makedirs(a.out, exist_ok=True)
     out = os.path.abspath(a.out)
     times = {}
@@ -87,7 +89,8 @@ def main(argv=None) -> int:
             bs.set_visible(obj, render=True)
     for t in parts["totems"]:
         bs.set_visible(t, render=False)
-    timed("clean_s", bs.render_png, os.path.join(out, "clean.png"), p)
+    if not a.no_clean:
+        timed("clean_s", bs.render_png, os.path.join(out, "clean.png"), p)
     import bpy
 
     record = {"format": 1, "description": desc, "camera": bs.camera_params(),
