@@ -356,10 +356,13 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
 
 
 def _backend_step(loss, opt, params) -> None:
-    """Back-propagate ``loss``, take one Adam step and push it into the scene."""
+    """Back-propagate ``loss``, take one Adam step and push it into the scene; the
+    backward pass on one thread, so its scatter-adds sum in one order and two fits of one
+    photo agree to the last bit (:func:`scenes.backend.one_thread`)."""
     dr = backend.modules()[0]
-    dr.backward(loss)
-    opt.step()
+    with backend.one_thread():
+        dr.backward(loss)
+        opt.step()
     params.update(opt)
 
 

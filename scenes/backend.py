@@ -18,8 +18,9 @@ chosen.
 from __future__ import annotations
 
 __all__ = ["use", "modules", "describe", "upload", "aligned", "single_thread_blas",
-           "BackendError"]
+           "one_thread", "BackendError"]
 
+import contextlib
 import glob
 import os
 import sys
@@ -132,6 +133,27 @@ def single_thread_blas() -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=1, user_api="blas")
+
+
+@contextlib.contextmanager
+def one_thread():
+    """Run the block's Dr.Jit kernels on the calling thread alone (LLVM backend).
+
+    The reverse of a gather (a texture lookup, a neighbour in a regulariser) is a float
+    scatter-add; across threads its additions come in the order the threads happen to
+    run, so a gradient's last bits, and a fit's result, change from run to run. On one
+    thread the order is fixed. Queued kernels are finished before the pool changes size
+    (resizing it under a running kernel crashes the process). On CUDA nothing changes.
+    """
+    dr = modules()[0]
+    n = dr.thread_count()
+    dr.sync_thread()
+    dr.set_thread_count(1)
+    try:
+        yield
+    finally:
+        dr.sync_thread()
+        dr.set_thread_count(n)
 
 
 def modules():
