@@ -14,20 +14,27 @@ arcs), ``b`` the edge's own bias (:data:`EDGE_BIAS_PX`) and ``e_a`` the arcs' sc
 A robust least-squares fit over the arcs (:func:`fit_offsets`) gives ``x_p`` and its
 covariance ``S_p``, to which the bias's spread from totem to totem is added.
 
-The mask lies on the silhouette when the edges nearest its outline agree, tightly, on
-its size (``|g| <= CONFIRM_SD`` sd, scatter at most :data:`TIGHT_PX`) and the rim's
-strongest edge (:mod:`inverse.rim`) is not outside it; then the mask's error is taken
-to be only what the photo shows beyond ``CONFIRM_SD`` sd, ``s_m^2 = max(0, x_p^2 -
-CONFIRM_SD^2 S_p)``, and a pixel-exact mask keeps its own pose. Otherwise ``x_p`` is
-measured from the rim's strongest edge and the mask's error is at least a drawn mask's
-slop, ``s_m^2 = max(x_p^2, MASK_SIGMA_PX^2)``. Either way the mask's outline residual
-beyond a pixel mask's steps (a polygon's chords) adds to ``s_m^2``, and the outline
-moves by ``w x_p`` with the inverse-variance weight ``w = s_m^2 / (s_m^2 + S_p)``.
+How much the mask lies on the silhouette is a share ``p`` in [0, 1], the product of
+three smooth tails (:func:`edge_share`): the nearest edges agree on the mask's size (``g``
+within ``CONFIRM_SD`` sd), tightly (the arcs' scatter within :data:`TIGHT_WIDTHS` of the
+edge's own width: a pixel filter, a blur or JPEG that widens the edge widens the scatter
+its peaks show, so a wide edge is allowed more), and the rim's strongest edge
+(:mod:`inverse.rim`) is not outside them. Two estimates are weighed by ``p``: on the
+edge, the mask's error is taken to be only what the photo shows beyond ``CONFIRM_SD``
+sd, ``s_m^2 = max(0, x_p^2 - CONFIRM_SD^2 S_p)``, so a pixel-exact mask keeps its own
+pose; off it, ``x_p`` is measured from the rim's strongest edge and the mask's error is
+at least a drawn mask's slop, ``s_m^2 = max(x_p^2, MASK_SIGMA_PX^2)``. Either way the
+mask's outline residual beyond a pixel mask's steps (a polygon's chords) adds to
+``s_m^2``, and the outline moves by ``w x_p`` with the inverse-variance weight ``w =
+s_m^2 / (s_m^2 + S_p)``; the two moves are mixed by ``p``.
 
-How sure: the outline's variance ``w S_p + (1 - w) min(x_p^2, S_p)`` (the photo right,
-or the mask right and off by at most what the photo saw) and the mask outline's own,
-mapped to the centre by the Jacobian of ``x -> P``: one sd along the line of sight and
-across it.
+How sure: on the edge the outline's variance is ``w S_p + (1 - w) x_p^2`` (the photo
+right, or the mask right but off by what the photo saw), off it ``w S_p + (1 - w)
+min(x_p^2, S_p)``; the mixture's variance adds ``q (1 - q)`` times the squared gap
+between the two moves, ``q`` being ``p`` kept within :data:`AMBIGUITY` of 0 and 1 (which
+edge is the silhouette is never certain where two lie apart); plus the mask outline's
+own, mapped to the centre by the Jacobian of ``x -> P``: one sd along the line of sight
+and across it.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
 weighed".
@@ -43,9 +50,10 @@ from inverse import pose, rim
 from scenes import camera, silhouette
 
 __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
-           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "SHAPE_QUANT_PX", "TIGHT_PX",
-           "NEAR_ITERATIONS", "REFINE_ITERATIONS", "REFINE_WINDOW_PX", "OUTER_PX",
-           "move_of", "POSE_FROM",
+           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "CONFIRM_SOFT_SD", "SHAPE_QUANT_PX",
+           "TIGHT_WIDTHS", "TIGHT_SOFT_WIDTHS", "NEAR_ITERATIONS", "REFINE_ITERATIONS",
+           "REFINE_WINDOW_PX", "OUTER_PX", "OUTER_SOFT_PX", "AMBIGUITY", "move_of",
+           "edge_share", "POSE_FROM",
            "uncertainty_record", "initial_centres", "CombinedPose", "edge_offsets",
            "fit_offsets", "photo_move", "combine_centre", "combined_poses"]
 
@@ -60,10 +68,14 @@ ITERATIONS = 3         # re-measurements from the moved outline
 NEAR_ITERATIONS = 2    # the same from the mask's outline, for the edge nearest it
 REFINE_ITERATIONS = 2  # the same from the rim's strongest edge, ...
 REFINE_WINDOW_PX = 1.0  # ... looking this far along each normal
-OUTER_PX = 0.5         # the rim's edge this far outside the nearest: the mask is inside
+OUTER_PX = 0.5         # the rim's edge this far outside the nearest: the mask is inside,
+OUTER_SOFT_PX = 0.25   # ... its share falling by exp(-1/2) every this much further (px)
 SHAPE_QUANT_PX = 0.25  # rms distance of a pixel-exact mask's outline from a smooth one
-TIGHT_PX = 0.3        # the arcs' edges agree on the outline's size to this (pixels, 1 sd)
-CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd
+TIGHT_WIDTHS = 0.2     # the arcs' edges agree on the outline's size to this (1 sd, in
+TIGHT_SOFT_WIDTHS = 0.1  # units of the edge's width), the share falling every this much
+CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd,
+CONFIRM_SOFT_SD = 0.25 # ... and the mask's share falls by exp(-1/2) every this much
+AMBIGUITY = 0.1        # the mixture's variance counts p as if within this of 0 and 1
 
 
 @dataclass
@@ -74,20 +86,21 @@ class CombinedPose:
     sd_along: float         # 1 sd of the centre along the line of sight
     sd_across: float        # 1 sd across it (each of the two lateral directions)
     mask_center: np.ndarray  # (3,) the mask's own pose
-    photo_move: np.ndarray  # (3,) x_p: the photo's edge less the mask's outline (du, dv, g)
+    photo_move: np.ndarray  # (3,) x_p: the photo's edge less the mask's outline (du, dv,
+    #                         g) px, of the likelier hypothesis (on the edge: p >= 0.5)
     photo_cov: np.ndarray   # (3, 3) its covariance S_p
-    mask_sd: np.ndarray     # (3,) s_m per component
     weight: np.ndarray      # (3,) w: 0 keeps the mask's outline, 1 takes the photo's
     shape_rms_px: float     # the mask outline's rms distance from the best sphere outline
-    on_edge: bool = False   # the mask's outline lies on the photo's nearest edge in size
+    edge_share: float = 0.0  # p: how much the mask's outline lies on the photo's edges
 
 
 def edge_offsets(P, R: float, K, grad, *, arcs: int = ARCS,
-                 window_px: float = WINDOW_PX) -> tuple[np.ndarray, np.ndarray]:
-    """Each arc's mean outward normal (arcs, 2) and the offset (arcs,) pixels, outward
+                 window_px: float = WINDOW_PX):
+    """Each arc's mean outward normal (arcs, 2), the offset (arcs,) pixels, outward
     positive, of the edge nearest the outline of the sphere (``P`` (3,) metres, ``R``
     metres) on that arc: the nearest local peak of the arc's mean step profile that
-    reaches :data:`PEAK_FRACTION` of the arc's top (NaN where there is none)."""
+    reaches :data:`PEAK_FRACTION` of the arc's top (NaN where there is none), and that
+    peak's width (arcs,) pixels, ``sqrt(-p / p'')`` (a Gaussian profile's sd)."""
     pts, nrm = rim.outline(P, R, K)
     ts = np.arange(-window_px, window_px + 1e-9, STEP_PX)
     prof = np.stack([silhouette.edge_at(pts + t * nrm, nrm, *grad) for t in ts], 1)
@@ -95,7 +108,7 @@ def edge_offsets(P, R: float, K, grad, *, arcs: int = ARCS,
     prof = prof[:m].reshape(arcs, -1, len(ts)).mean(1)            # (arcs, T)
     normals = nrm[:m].reshape(arcs, -1, 2).mean(1)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    offsets = np.full(arcs, np.nan)
+    offsets, widths = np.full(arcs, np.nan), np.full(arcs, np.nan)
     for a, p in enumerate(prof):
         inner = p[1:-1]
         peak = (inner >= p[:-2]) & (inner > p[2:]) & (inner >= PEAK_FRACTION * p.max())
@@ -106,7 +119,9 @@ def edge_offsets(P, R: float, K, grad, *, arcs: int = ARCS,
             den = p[i - 1] - 2 * p[i] + p[i + 1]
             offsets[a] = ts[i] + (0.5 * STEP_PX * (p[i - 1] - p[i + 1]) / den if den < 0
                                   else 0.0)
-    return normals, offsets
+            if den < 0:
+                widths[a] = STEP_PX * np.sqrt(-p[i] / den)
+    return normals, offsets, widths
 
 
 def fit_offsets(normals, offsets) -> tuple[np.ndarray, np.ndarray]:
@@ -152,21 +167,62 @@ _BIAS_SD = np.array([EDGE_LATERAL_SD_PX, EDGE_LATERAL_SD_PX, EDGE_BIAS_SD_PX])
 def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATIONS,
                window_px: float = WINDOW_PX):
     """The photo's nearest edge as a move ``x`` (3,) pixels of ``P0``'s outline (du, dv,
-    g, the edge bias taken off) and its covariance (3, 3): measured from ``start`` (a
-    move, default none), the outline moved there, measured again."""
+    g, the edge bias taken off), its covariance (3, 3) and the edge's median width
+    (pixels, NaN without an edge): measured from ``start`` (a move, default none), the
+    outline moved there, measured again."""
     x = np.zeros(3) if start is None else np.asarray(start, np.float64).copy()
-    cov = np.diag([np.inf] * 3)
+    cov, width = np.diag([np.inf] * 3), np.nan
     for _ in range(iterations):
-        normals, off = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
-                                    window_px=window_px)
+        normals, off, wid = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
+                                         window_px=window_px)
         dx, found = fit_offsets(normals, off - EDGE_BIAS_PX)
         if not np.all(np.isfinite(found)) and np.all(np.isfinite(cov)):
             break             # no edge this time: keep the last measurement
         cov = found
+        width = float(np.nanmedian(wid)) if np.isfinite(wid).any() else np.nan
         x = np.clip(x + dx, -_REACH, _REACH)   # within the rim search's reach (READ_PX)
         if np.abs(dx).max() < 0.05:
             break
-    return x, cov + np.diag(_BIAS_SD ** 2)
+    return x, cov + np.diag(_BIAS_SD ** 2), width
+
+
+def _tail(u: float, knee: float, soft: float) -> float:
+    """1 up to ``knee``, then ``exp(-(u - knee)^2 / (2 soft^2))``."""
+    return float(np.exp(-0.5 * (max(u - knee, 0.0) / soft) ** 2))
+
+
+def edge_share(x_n, S_n, width: float, x_r) -> float:
+    """How much the mask's outline lies on the silhouette, p in [0, 1]: the edges nearest
+    it (``x_n`` (3,) px, ``S_n`` (3, 3) px^2, :func:`photo_move` from the mask's outline)
+    agree on its size within ``CONFIRM_SD`` sd, their scatter is within ``TIGHT_WIDTHS``
+    of the edge's ``width`` (px), and the rim's strongest edge ``x_r`` (3,) px is at most
+    ``OUTER_PX`` outside them; each test a smooth tail beyond its knee."""
+    if not np.all(np.isfinite(S_n)):
+        return 0.0                                 # no edge near the mask
+    scatter = np.sqrt(max(S_n[2, 2] - EDGE_BIAS_SD_PX ** 2, 0.0))
+    width = width if np.isfinite(width) and width > 0 else 1.0
+    return (_tail(abs(x_n[2]) / np.sqrt(S_n[2, 2]), CONFIRM_SD, CONFIRM_SOFT_SD)
+            * _tail(scatter / width, TIGHT_WIDTHS, TIGHT_SOFT_WIDTHS)
+            * _tail(x_r[2] - x_n[2], OUTER_PX, OUTER_SOFT_PX))
+
+
+def _weighed(x_p, S, on_edge: bool, extra2: float):
+    """The outline move (3,), its variance (3,) and the photo's weight (3,) for one
+    hypothesis: the mask on the silhouette (``on_edge``) or off it; ``extra2`` (px^2) the
+    mask outline's own variance beyond the edge's."""
+    S_p = np.diag(S)
+    if on_edge:               # the mask is off only where the photo says so beyond doubt
+        s_m2 = np.maximum(x_p ** 2 - CONFIRM_SD ** 2 * S_p, 0.0)
+    else:                     # off an edge: a drawn mask's slop, or what the photo saw
+        s_m2 = np.maximum(x_p ** 2, rim.MASK_SIGMA_PX ** 2)
+    s_m2 = s_m2 + extra2
+    if not np.all(np.isfinite(S_p)):   # no edge: the mask's pose, as sure as a drawn one
+        return np.zeros(3), np.maximum(s_m2, rim.MASK_SIGMA_PX ** 2 + extra2), np.zeros(3)
+    w = s_m2 / (s_m2 + S_p)
+    # the photo right (its variance) or the mask right (then off by what the photo saw;
+    # off an edge, by at most the photo's own spread)
+    seen = x_p ** 2 if on_edge else np.minimum(x_p ** 2, S_p)
+    return w * x_p, w * S_p + (1 - w) * seen + extra2, w
 
 
 def _jacobian(P0, R, K, x, h=0.05) -> np.ndarray:
@@ -185,34 +241,23 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     # the mask pose's own spread: the outline's residual over its independent points
     # (a pixel outline's steps are correlated over about four)
     quant_px = max(shape_rms, 0.1) / np.sqrt(max(len(uv) / 4.0, 1.0))
+    extra2 = max(shape_rms ** 2 - SHAPE_QUANT_PX ** 2, 0.0) + quant_px ** 2
     # the edge nearest the mask's outline: does the mask lie on the silhouette?
-    x_n, S_n = photo_move(P_m, R, K, grad, iterations=NEAR_ITERATIONS)
-    scatter_g = np.sqrt(max(S_n[2, 2] - EDGE_BIAS_SD_PX ** 2, 0.0))
-    # the rim's strongest edge near the mask (inverse.rim), its bias taken off
+    x_n, S_n, width = photo_move(P_m, R, K, grad, iterations=NEAR_ITERATIONS)
+    # the rim's strongest edge near the mask (inverse.rim), its bias taken off, refined
+    # by the nearest peaks
     x_r = move_of(P_m, rim.refine_centre(P_m, R, K, grad), R, K)
     x_r[2] -= EDGE_BIAS_PX
-    on_edge = x_n[2] ** 2 <= CONFIRM_SD ** 2 * S_n[2, 2] and scatter_g <= TIGHT_PX \
-        and x_r[2] - x_n[2] <= OUTER_PX
-    if on_edge:
-        x_p, S = x_n, S_n
-    else:                     # not on an edge: the rim's strongest edge, then its nearest
-        x_p, S = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
-                            window_px=REFINE_WINDOW_PX)
-    S_p = np.diag(S)
-    shape2 = max(shape_rms ** 2 - SHAPE_QUANT_PX ** 2, 0.0)  # beyond a pixel mask's steps
-    if on_edge:               # the mask is off only where the photo says so beyond doubt
-        s_m2 = np.maximum(x_p ** 2 - CONFIRM_SD ** 2 * S_p, 0.0)
-    else:                     # off an edge: a drawn mask's slop, or what the photo saw
-        s_m2 = np.maximum(x_p ** 2, rim.MASK_SIGMA_PX ** 2)
-    s_m2 = s_m2 + shape2 + quant_px ** 2
-    if np.all(np.isfinite(S_p)):
-        w = s_m2 / (s_m2 + S_p)
-        # the photo right (its variance) or the mask right (then off by at most what
-        # the photo saw, within the photo's own spread)
-        post = w * S_p + (1 - w) * np.minimum(x_p ** 2, S_p) + shape2 + quant_px ** 2
-    else:                     # no edge near the mask: its pose, as sure as a drawn one
-        w, post = np.zeros(3), s_m2
-    x = w * x_p
+    x_f, S_f, _ = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
+                             window_px=REFINE_WINDOW_PX)
+    p = edge_share(x_n, S_n, width, x_r)
+    x1, v1, w1 = _weighed(x_n, S_n, True, extra2)
+    x0, v0, w0 = _weighed(x_f, S_f, False, extra2)
+    q = min(max(p, AMBIGUITY), 1.0 - AMBIGUITY)
+    x = p * x1 + (1 - p) * x0
+    post = p * v1 + (1 - p) * v0 + q * (1 - q) * (x1 - x0) ** 2
+    w = p * w1 + (1 - p) * w0
+    x_p, S = (x_n, S_n) if p >= 0.5 else (x_f, S_f)
     J = _jacobian(P_m, R, K, x)
     C = J @ np.diag(post) @ J.T                               # centre covariance, m^2
     P = rim._moved(P_m, R, K, x)
@@ -220,8 +265,8 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     along = float(np.sqrt(max(los @ C @ los, 0.0)))
     across = float(np.sqrt(max(0.5 * (np.trace(C) - los @ C @ los), 0.0)))
     return CombinedPose(center=P, sd_along=along, sd_across=across, mask_center=P_m,
-                        photo_move=x_p, photo_cov=S, mask_sd=np.sqrt(s_m2), weight=w,
-                        shape_rms_px=float(shape_rms), on_edge=bool(on_edge))
+                        photo_move=x_p, photo_cov=S, weight=w,
+                        shape_rms_px=float(shape_rms), edge_share=p)
 
 
 def combined_poses(image, masks, K, radius) -> list[CombinedPose]:

@@ -156,3 +156,39 @@ def test_a_shifted_mask_on_a_render_is_less_sure(scene):
     exact, _, _ = _weighed(scene, "exact")
     moved, _, _ = _weighed(scene, "shift2", seed=1)
     assert np.median([m.sd_across / e.sd_across for m, e in zip(moved, exact)]) > 1.5
+
+
+def test_the_masks_share_falls_smoothly_with_the_scatter_in_edge_widths():
+    """The share of an outline whose nearest edges agree on its size falls without a
+    jump as their scatter grows, and the same scatter counts less on a wider edge (a
+    pixel filter or JPEG widens the edge and the scatter of its peaks)."""
+    x_n, x_r = np.array([0.1, -0.1, 0.05]), np.zeros(3)
+
+    def share(scatter, width):
+        S = np.diag([0.3, 0.3, scatter ** 2 + pose_combined.EDGE_BIAS_SD_PX ** 2])
+        return pose_combined.edge_share(x_n, S, width, x_r)
+
+    s = np.linspace(0.0, 1.0, 201)
+    p = np.array([share(x, 1.2) for x in s])
+    assert p[0] == 1.0 and p[-1] < 0.01
+    assert np.all(np.diff(p) <= 1e-12) and np.abs(np.diff(p)).max() < 0.05
+    assert share(0.33, 1.6) > share(0.33, 1.2) + 0.2
+    # the rim's strongest edge well outside the nearest: the mask sits on the band
+    assert pose_combined.edge_share(x_n, np.diag([0.3, 0.3, 0.05]), 1.2,
+                                    np.array([0.0, 0.0, 2.0])) < 0.01
+
+
+@pytest.mark.slow
+def test_exact_masks_on_a_photo_through_a_pixel_filter_keep_the_masks_pose(scene):
+    """A 1.5 px (full width at half maximum) Gaussian filter widens every edge: the exact
+    masks keep their pose to 0.1 % of the distance."""
+    from scipy.ndimage import gaussian_filter
+
+    sc = scene[0]
+    s = 1.5 / 2.355
+    img = gaussian_filter(np.asarray(sc.image, np.float32), (s, s, 0))
+    masks = np.asarray(sc.masks, bool)
+    poses = pose_combined.combined_poses(img, masks, sc.K, sc.radius)
+    P_mask = pose.initial_pose(masks, sc.K, sc.radius)
+    d = np.linalg.norm(P_mask, axis=1)
+    assert np.all(np.linalg.norm([c.center for c in poses] - P_mask, axis=1) / d < 1e-3)
