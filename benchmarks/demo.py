@@ -84,8 +84,9 @@ def main(argv=None) -> int:
     verdicts = {}
     for folder in (scene, tampered):
         code = run("check", str(folder))
-        verdicts[folder.name] = {0: "consistent", 1: "INCONSISTENT"}.get(code, "error")
-        if code not in (0, 1):
+        verdicts[folder.name] = {0: "consistent", 1: "INCONSISTENT",
+                                 4: "unverifiable"}.get(code, "error")
+        if code not in (0, 1, 4):
             return 1
     picture(scene, tampered, args.out / "demo.png")
     print()

@@ -9,38 +9,56 @@ from verify.report import verify_scene
 from verify_cases import SQUARE, box_mask, make_fit, make_scene, texture, with_square
 
 
-def test_score_is_the_excess_of_the_worst_patches_over_the_median():
-    # 100 patches: 97 at 0.1, three at 0.5 -> top-3 mean 0.5, median 0.1
+def test_score_is_the_mean_of_the_worst_patches():
+    # 100 patches: 97 at 0.1, three at 0.5 -> top-3 mean 0.5 (median 0.1, reported)
     s = np.full((10, 10), 0.1)
     s[0, :3] = 0.5
     g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
-    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.3}, calibration=None)
-    assert d.medians["L1"] == pytest.approx(0.1) and d.scores["L1"] == pytest.approx(0.4)
-    assert d.score == pytest.approx(0.4 / 0.3) and d.threshold == 1.0
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.4}, calibration=None)
+    assert d.medians["L1"] == pytest.approx(0.1) and d.scores["L1"] == pytest.approx(0.5)
+    assert d.score == pytest.approx(0.5 / 0.4) and d.threshold == 1.0
     assert d.verdict == "inconsistent"
     assert d.drivers and all(x["row"] == 0 and x["col"] < 3 for x in d.drivers)
-    assert all(x["excess"] == pytest.approx(0.4 / 0.3, abs=1e-5) and x["metric"] == "L1"
+    assert all(x["excess"] == pytest.approx(0.5 / 0.4, abs=1e-5) and x["metric"] == "L1"
                for x in d.drivers)
-    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.45}, calibration=None)
-    assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.4 / 0.45, abs=1e-5)
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.6}, calibration=None)
+    assert d.verdict == "consistent" and d.drivers[0]["excess"] == pytest.approx(0.5 / 0.6, abs=1e-5)
+    # the verdict before the evidence map measured the excess over the median patch
+    d = verdict.decide({"L1": s}, np.ones_like(s), g, thresholds={"L1": 0.3},
+                       calibration=None, reference="median")
+    assert d.scores["L1"] == pytest.approx(0.4)
+
+
+def test_editing_more_patches_never_lowers_the_score():
+    # one bad patch, then the same patch and more: the median reference let the second
+    # photo score lower (its median rose); the score without it cannot
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    one = np.full((10, 10), 0.02)
+    one[2, 2] = 0.3
+    more = one.copy()
+    more[4:9, :] = 0.12                          # half the photo edited a little
+    for reference, lower in (("median", True), ("none", False)):
+        a, b = (verdict.decide({"UNSEEN": x}, np.ones_like(x), g, calibration=None,
+                               reference=reference).score for x in (one, more))
+        assert (b < a) is lower
 
 
 def test_either_metric_over_its_threshold_decides():
-    # L1 flat (nothing), CHROMA high in one corner: inconsistent, driven by CHROMA
+    # L1 flat under its threshold, CHROMA high in one corner: inconsistent, by CHROMA
     g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
     l1 = np.full((10, 10), 0.1)
     chroma = np.full((10, 10), 0.01)
     chroma[9, 7:] = 0.2
     d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
                        thresholds={"L1": 0.18, "CHROMA": 0.1}, calibration=None)
-    assert d.scores["L1"] == pytest.approx(0.0) and d.scores["CHROMA"] == pytest.approx(0.19)
-    assert d.score == pytest.approx(1.9) and d.verdict == "inconsistent"
+    assert d.scores["L1"] == pytest.approx(0.1) and d.scores["CHROMA"] == pytest.approx(0.2)
+    assert d.score == pytest.approx(2.0) and d.verdict == "inconsistent"
     assert {(x["row"], x["col"]) for x in d.drivers} <= {(9, 7), (9, 8), (9, 9)}
     assert all(x["metric"] == "CHROMA" and x["L1"] == pytest.approx(0.1) for x in d.drivers)
     # the same patches under a CHROMA threshold above their excess: consistent
     d = verdict.decide({"L1": l1, "CHROMA": chroma}, np.ones_like(l1), g,
                        thresholds={"L1": 0.18, "CHROMA": 0.25}, calibration=None)
-    assert d.verdict == "consistent" and d.score == pytest.approx(0.19 / 0.25)
+    assert d.verdict == "consistent" and d.score == pytest.approx(0.2 / 0.25)
 
 
 def test_noisy_recon_is_consistent():

@@ -33,7 +33,7 @@ from pathlib import Path
 from scenes.errors import BadInput
 
 __all__ = ["PACKAGES", "package_version", "source_hash", "probe", "compare_workers",
-           "thread_shares", "run_job", "tls_security", "Engine"]
+           "thread_shares", "VERDICT_CODES", "run_job", "tls_security", "Engine"]
 
 PACKAGES = ("inverse", "scenes", "verify")
 """The project's packages, whose files :func:`source_hash` covers."""
@@ -144,12 +144,16 @@ def _env(threads: dict[str, int]) -> dict:
     return env
 
 
+VERDICT_CODES = (0, 1, 4)
+"""Exit codes of a check that gave a verdict (consistent, inconsistent, unverifiable)."""
+
+
 def run_job(argv: list[str], timeout: float, threads: dict[str, int],
             folder: str | None = None, source: str = "") -> dict:
     """Run ``totems ARGV`` (with ``--json``) in a fresh process; never raises.
 
-    Returns {"status": "ok", "wall_s", the command's JSON summary...} when it exits 0
-    or 1, and then writes ``folder``/run.json (the command, ``source``, the wall time:
+    Returns {"status": "ok", "wall_s", the command's JSON summary...} when it exits 0,
+    1 or 4 (a verdict), and then writes ``folder``/run.json (the command, ``source``, the wall time:
     what resuming reads, :mod:`verify.runs`), here, so that a run whose client has gone
     still counts; else {"status": "failed", "error" (its last stderr line),
     "exit_code", "wall_s"}.
@@ -162,7 +166,7 @@ def run_job(argv: list[str], timeout: float, threads: dict[str, int],
     except subprocess.TimeoutExpired:
         return {"status": "failed", "error": f"timed out after {timeout:.0f} s"}
     wall = time.perf_counter() - t0
-    if proc.returncode in (0, 1):
+    if proc.returncode in VERDICT_CODES:
         try:
             summary = json.loads(proc.stdout.strip().splitlines()[-1])
         except (ValueError, IndexError):

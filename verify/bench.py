@@ -227,6 +227,7 @@ def summarise(runs: list[dict]) -> dict:
             "untouched_consistent": _frac(r["verdict"] == "consistent" for r in untouched),
             "manipulated_inconsistent": _frac(r["verdict"] == "inconsistent"
                                               for r in manipulated),
+            "unverifiable": _frac(r["verdict"] == "unverifiable" for r in joint),
             "n_untouched": len(untouched), "n_manipulated": len(manipulated)},
         "totems_study": {int(n): _mean(v) for n, v in sorted(totems.items())},
         "time_per_stage_s": {k: _mean(v) for k, v in stages.items()},
@@ -284,7 +285,9 @@ def markdown(bench: dict) -> str:
               f"- untouched judged consistent: {_fmt(a['untouched_consistent'], 2)} "
               f"(n = {a['n_untouched']})",
               f"- manipulated judged inconsistent: {_fmt(a['manipulated_inconsistent'], 2)} "
-              f"(n = {a['n_manipulated']})"]
+              f"(n = {a['n_manipulated']})",
+              f"- unverifiable (untouched and manipulated): "
+              f"{_fmt(a.get('unverifiable'), 2)}"]
     if len(s["totems_study"]) > 1:
         lines += ["", "## Number of totems (recon L1)\n", "| totems | ours | paper |",
                   "|---|---|---|"]

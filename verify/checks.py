@@ -18,10 +18,10 @@ from verify.batch import Engine
 from verify.bench import describe_scene, plan
 from verify.runs import Run, run_all
 
-__all__ = ["EXIT_OK", "EXIT_INCONSISTENT", "EXIT_FAILED", "scene_folders", "unique_names",
-           "photo_line", "index_entry", "render_index", "check_many", "from_args"]
+__all__ = ["EXIT_OK", "EXIT_INCONSISTENT", "EXIT_FAILED", "EXIT_UNVERIFIABLE",
+           "scene_folders", "unique_names", "photo_line", "index_entry", "render_index", "check_many", "from_args"]
 
-EXIT_OK, EXIT_INCONSISTENT, EXIT_FAILED = 0, 1, 2
+EXIT_OK, EXIT_INCONSISTENT, EXIT_FAILED, EXIT_UNVERIFIABLE = 0, 1, 2, 4
 
 
 def scene_folders(dirs) -> list[Path]:
@@ -124,7 +124,7 @@ def check_many(dirs, out, *, check_flags=(), verify_flags=(), jobs: int = 1,
     ``verify_flags``: those that apply when a photo reuses another's fit (region);
     ``say``: called with :func:`photo_line` as each photo finishes. Returns the
     summary, with ``exit_code``: 2 if any photo could not be checked, else 1 if any was
-    inconsistent, else 0.
+    inconsistent, else 4 if any was unverifiable, else 0.
     """
     out = Path(out).resolve()                 # the workers' working folders differ
     paths = scene_folders(dirs)
@@ -139,10 +139,11 @@ def check_many(dirs, out, *, check_flags=(), verify_flags=(), jobs: int = 1,
     by_scene = {r.info["scene"]: r.folder for r in runs}
     photos = [index_entry(r, by_scene[r["scene"]], out) for r in records]
     counts = {v: sum(p["verdict"] == v for p in photos if p["status"] == "ok")
-              for v in ("consistent", "inconsistent")}
+              for v in ("consistent", "inconsistent", "unverifiable")}
     counts["failed"] = sum(p["status"] != "ok" for p in photos)
     code = EXIT_FAILED if counts["failed"] else (
-        EXIT_INCONSISTENT if counts["inconsistent"] else EXIT_OK)
+        EXIT_INCONSISTENT if counts["inconsistent"] else
+        EXIT_UNVERIFIABLE if counts["unverifiable"] else EXIT_OK)
     index = {"format": 1, "photos": photos, "counts": counts, "exit_code": code,
              "resumed": sum(p["resumed"] for p in photos), "workers": engine.slots,
              "scheduler": scheduler or "local",
@@ -172,6 +173,6 @@ def from_args(args) -> dict:
                          tls=(args.tls_ca_file, args.tls_cert, args.tls_key), say=say)
     if say:
         say(f"{summary['photos']} photos: {summary['consistent']} consistent, "
-            f"{summary['inconsistent']} inconsistent, {summary['failed']} could not be "
-            f"checked")
+            f"{summary['inconsistent']} inconsistent, {summary['unverifiable']} "
+            f"unverifiable, {summary['failed']} could not be checked")
     return summary

@@ -1,7 +1,8 @@
 """The ``totems`` command: parse, call the library, map errors to exit codes.
 
 Exit codes (as ``cmp``/``diff``): 0 ran (and for verify/check: consistent), 1 verify/check
-found the photo inconsistent with its totems, 2 bad input or usage (one line on stderr).
+found the photo inconsistent with its totems, 2 bad input or usage (one line on stderr),
+3 masks found too few totems, 4 verify/check: unverifiable.
 Everything else is a bug. Verbs and outputs: ``docs/contract.md``.
 """
 
@@ -18,6 +19,7 @@ from verify import arguments, helptext
 __all__ = ["main"]
 
 EXIT_OK, EXIT_INCONSISTENT, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
+EXIT_UNVERIFIABLE = 4
 EXIT_BUG = 70                      # an unexpected error (sysexits' EX_SOFTWARE)
 
 
@@ -430,6 +432,8 @@ def main(argv=None) -> int:
         _print_summary(args.verb, summary)
     if summary.get("verdict") == "inconsistent":
         return EXIT_INCONSISTENT
+    if summary.get("verdict") == "unverifiable":
+        return EXIT_UNVERIFIABLE
     return summary.get("exit_code", EXIT_OK)      # check SCENE...: its photos' worst
 
 

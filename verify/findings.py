@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from verify import patches
+from verify import evidence, patches
 from verify import verdict as verdict_mod
 
 __all__ = ["Report"]
@@ -26,7 +26,9 @@ class Report:
     :mod:`verify.patches`); ``keep`` (G, G) patches overlapping the protected region;
     ``silhouettes`` (n, H, W) bool, each fitted sphere's image (the outlines report.html
     draws; None when unknown). ``scene_name``: the scene folder's name, for report.html.
-    Neither is in report.json.
+    Neither is in report.json. ``judged`` (H, W) bool, the pixels RANGE and UNSEEN judge
+    (the protected region where the evidence map resolves the surface); ``evidence``
+    the :class:`verify.evidence.Evidence` map (None for a fit without rays or depth).
     """
 
     verdict: str
@@ -51,6 +53,15 @@ class Report:
     silhouettes: np.ndarray | None = None
     scene_name: str = ""
     scale: int = 1
+    judged: np.ndarray | None = None
+    evidence: object = None
+
+    @property
+    def judged_fraction(self) -> float | None:
+        """Fraction of the photo's non-totem pixels RANGE and UNSEEN judge."""
+        if self.judged is None:
+            return None
+        return float(self.judged.sum() / max((~self.totem_mask).sum(), 1))
 
     @property
     def drivers(self) -> list:
@@ -61,7 +72,8 @@ class Report:
         threshold and median patch; ``score`` is the largest score / threshold),
         ``statistic``, ``p_value`` and ``line_p_value`` (the calibration's,
         :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
-        protected region's shape), ``working_scale`` (:mod:`scenes.working`) and a
+        protected region's shape), ``working_scale`` (:mod:`scenes.working`),
+        ``judged_fraction`` and ``evidence`` (:mod:`verify.evidence`) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -83,6 +95,12 @@ class Report:
             "key_fingerprint": self.key_fingerprint,
             "region": self.region,
             "working_scale": int(self.scale),
+            "judged_fraction": _num(self.judged_fraction),
+            "evidence": None if self.evidence is None else {
+                "min_totems": int(evidence.MIN_TOTEMS),
+                "min_parallax": float(evidence.MIN_PARALLAX),
+                "resolved_fraction": _num(float(self.evidence.resolved.mean())),
+                "min_judged": float(verdict_mod.MIN_JUDGED)},
         }
 
 

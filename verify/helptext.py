@@ -37,17 +37,20 @@ _FAILED = ("  2    bad input or usage (one line on stderr saying what is wrong)\
            "  70   a bug (the traceback, and a line saying so)\n"
            "  130  interrupted")
 _JUDGED = ("  0    consistent: the photo agrees with its totems\n"
-           "  1    inconsistent: it does not (read the p-value beside the word)\n")
+           "  1    inconsistent: it does not\n"
+           "  4    unverifiable: the totems establish too little of it to tell\n")
 EXIT_CODES = {
     "totems": "  0    ran; for verify and check: consistent\n"
               "  1    verify, check: inconsistent\n"
               "  2    bad input or usage (one line on stderr saying what is wrong)\n"
               "  3    masks: fewer totems found than wanted\n"
+              "  4    verify, check: unverifiable\n"
               "  70   a bug\n"
               "  130  interrupted",
     "verify": _JUDGED + _FAILED,
     "check": _JUDGED + _FAILED + "\n  with several SCENEs: 2 if any photo could not be "
-             "checked, else 1 if any\n  was inconsistent, else 0",
+             "checked, else 1 if any\n  was inconsistent, else 4 if any was unverifiable, "
+             "else 0",
     "bench": "  0    ran, whatever its scenes gave (failed runs are counted in its "
              "summary)\n" + _FAILED,
     "masks": "  0    masks written, or the folder's own kept\n"

@@ -186,6 +186,13 @@ def verdict_words(data: dict) -> dict:
     if data["verdict"] == "consistent":
         headline = ("Consistent: nothing in the protected region disagrees with what the "
                     "totems saw.")
+    elif data["verdict"] == "unverifiable":
+        judged = data.get("judged_fraction") or 0.0
+        least = (data.get("evidence") or {}).get("min_judged", 0.0)
+        headline = (f"Unverifiable: the totems establish too little of this photo to "
+                    f"vouch for it ({100 * judged:.0f} % judged, at least "
+                    f"{100 * least:.0f} % needed); nothing in that part disagrees with "
+                    f"what they saw.")
     else:
         where = f"{n} place{'s' if n != 1 else ''}" if n else "part"
         headline = (f"Inconsistent: {where} in the protected region disagree"
@@ -275,6 +282,11 @@ def render_report(report: Report, overlays: dict) -> str:
         "layers": _layers(report, overlays, data),
         "region_uri": data_uri(region_picture(report.image, report.protected)),
         "protected": f"{100 * data['protected_fraction']:.0f}",
+        "judged_uri": None if report.evidence is None else
+        data_uri(region_picture(report.image, report.judged)),
+        "judged": _fmt(None if data["judged_fraction"] is None
+                       else 100 * data["judged_fraction"], ".0f"),
+        "evidence": data["evidence"],
         "region": data["region"], "region_words": REGION_WORDS.get(data["region"], ""),
         "totems": _totems(report, data),
         "fit_rgb": _css(FIT_RGB), "mask_rgb": _css(MASK_RGB),

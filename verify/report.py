@@ -18,7 +18,8 @@ from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.camera import sphere_silhouette
 from scenes.errors import BadInput
-from verify import absence, corroborate, html_report, patches, region, resolution
+from verify import absence, corroborate, evidence, html_report, patches, region
+from verify import resolution
 from verify import verdict as verdict_mod
 from verify.findings import Report
 
@@ -78,30 +79,24 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                                         n_totem_pixels=int(totem_mask.sum()),
                                         shape=region_shape)
     grid = patches.patch_grid(totem_mask)
-    # the photo is compared at the evidence's resolution (verify.resolution)
-    spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
-    hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
-    hue_sigma = resolution.photo_sigma(spacing, hue)
-    errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
-                                  chroma_sigma=hue_sigma)
-    rays = getattr(fit, "rays", None)
-    if rays is not None:          # the two tests that read the totem rays themselves
-        frame = FrustumFrame.from_dict(fit.grid)
-        errors["CORROB"] = corroborate.corroboration(rays, frame, image,
-                                                     photo_sigma=hue_sigma)
-        errors["ABSENT"] = absence.absence(rays, frame, image, totem_mask, scene.K,
-                                           getattr(fit, "recon_depth", None))
-    errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
-                                          errors.get("CORROB", np.nan))
-    heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     seen = protected & ~totem_mask
-    cover = patches.patch_fraction(seen, grid)
-    keep = cover > 0
+    ev = _evidence(scene, fit)
+    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev)
+    heat = patches.heatmaps(errors, grid, valid=~totem_mask)
+    keep = patches.patch_fraction(seen, grid) > 0
 
-    # verdict on patch scores over protected, non-totem pixels (sRGB [0, 1])
-    inside = patches.patch_scores(errors, grid, seen)
+    # each metric judges the protected pixels where its evidence holds (sRGB [0, 1])
+    judged = seen if ev is None else seen & ev.resolved
+    # (ABSENT judges the points in front of the surface its three totems resolve)
+    inside = patches.patch_scores({m: e for m, e in errors.items() if m != "ABSENT"},
+                                  grid, judged)
+    if "ABSENT" in errors:
+        inside.update(patches.patch_scores({"ABSENT": errors["ABSENT"]}, grid, seen))
+    cover = {m: patches.patch_fraction(seen if m == "ABSENT" else judged, grid)
+             for m in inside}
+    judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
     decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds,
-                                  calibration=calibration)
+                                  calibration=calibration, judged_fraction=judged_fraction)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None}
@@ -132,7 +127,41 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         timing_s=timing, versions={**_versions(), **(versions or {})},
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
-        scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1))
+        scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
+        judged=judged, evidence=ev)
+
+
+def _evidence(scene: folder.Scene, fit) -> evidence.Evidence | None:
+    """The evidence map of the photo (:mod:`verify.evidence`), None for a fit without
+    rays or depth (written before they were kept: every protected pixel is judged)."""
+    rays, depth = getattr(fit, "rays", None), getattr(fit, "recon_depth", None)
+    if rays is None or depth is None:
+        return None
+    return evidence.evidence_map(rays, fit.centers, depth, scene.K)
+
+
+def _pixel_errors(scene, fit, image, recon, totem_mask, ev) -> dict:
+    """Every metric's per-pixel map (:mod:`verify.patches`), CORROB and ABSENT from the
+    totem rays when the fit has them, UNSEEN from CHROMA and CORROB."""
+    H, W = image.shape[:2]
+    # the photo is compared at the evidence's resolution (verify.resolution)
+    spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
+    hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
+    hue_sigma = resolution.photo_sigma(spacing, hue)
+    errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
+                                  chroma_sigma=hue_sigma)
+    rays = getattr(fit, "rays", None)
+    if rays is not None:          # the two tests that read the totem rays themselves
+        frame = FrustumFrame.from_dict(fit.grid)
+        errors["CORROB"] = corroborate.corroboration(rays, frame, image,
+                                                     photo_sigma=hue_sigma)
+        errors["ABSENT"] = absence.absence(
+            rays, frame, image, totem_mask, scene.K, getattr(fit, "recon_depth", None),
+            centers=fit.centers, spacing=None if ev is None else ev.spacing,
+            min_parallax=0.0 if ev is None else evidence.MIN_PARALLAX)
+    errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
+                                          errors.get("CORROB", np.nan))
+    return errors
 
 
 def _totems(scene: folder.Scene, fit) -> tuple[list, list]:
@@ -218,6 +247,11 @@ def write_verify(report: Report, out_dir) -> Path:
     """
     out = Path(out_dir)
     folder.write_image(out / "protect_mask.png", report.protected)
+    if report.evidence is not None:
+        folder.write_image(out / "judged_mask.png", report.judged)
+        folder.write_npz(out / "evidence.npz", n_totems=report.evidence.n_totems
+                         .astype(np.uint8), parallax=report.evidence.parallax
+                         .astype(np.float32), judged=report.judged)
     folder.write_image(out / "recon.png", report.recon)
     overlays = {}
     for name, heat in report.heatmaps.items():

@@ -51,7 +51,7 @@ import numpy as np
 from scenes.errors import BadInput
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
-           "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "Verdict",
+           "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED", "Verdict",
            "top_k", "metric_score", "decide", "name_drivers"]
 
 RANGE_THRESHOLD = 0.140
@@ -95,6 +95,10 @@ MIN_COVER = 0.5
 
 MAX_DRIVERS = 8
 """At most this many (non-overlapping) patches are named as drivers in the report."""
+
+MIN_JUDGED = 0.05
+"""A photo the metrics judge less than this fraction of, and find nothing wrong in, is
+``unverifiable``: the totems establish too little of it to call it consistent."""
 
 
 @dataclass
@@ -140,12 +144,20 @@ def top_k(n: int) -> int:
     return min(n, max(TOP_K_MIN, math.ceil(TOP_K_FRACTION * n)))
 
 
-def metric_score(patch_scores: np.ndarray, used: np.ndarray):
-    """One metric's median patch, per-patch excess over it (NaN where not ``used``) and
-    score (mean of the top-k excesses)."""
+def metric_score(patch_scores: np.ndarray, used: np.ndarray, *,
+                 reference: str = "none"):
+    """One metric's median patch, per-patch excess (NaN where not ``used``) and score
+    (mean of the top-k excesses).
+
+    ``reference``: "none" (default), the excess is the patch score itself, so editing
+    more of the photo can only raise the score; "median", the excess over the median
+    patch (the verdict before the evidence map, kept to measure against).
+    """
+    if reference not in ("none", "median"):
+        raise ValueError(f"reference must be 'none' or 'median', got {reference!r}")
     s = np.asarray(patch_scores, dtype=np.float64)
     med = float(np.median(s[used]))
-    excess = np.where(used, s - med, np.nan)
+    excess = np.where(used, s - (med if reference == "median" else 0.0), np.nan)
     k = top_k(int(used.sum()))
     return med, excess, float(np.sort(excess[used])[::-1][:k].mean())
 
@@ -153,22 +165,28 @@ def metric_score(patch_scores: np.ndarray, used: np.ndarray):
 _SHIPPED = "shipped"
 
 
-def decide(patch_scores: dict, cover: np.ndarray, grid, *,
-           thresholds: dict | None = None, calibration=_SHIPPED) -> Verdict:
+def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
+           calibration=_SHIPPED, reference: str = "none",
+           judged_fraction: float | None = None,
+           min_judged: float = MIN_JUDGED) -> Verdict:
     """The verdict from patch scores.
 
     Parameters
     ----------
     patch_scores : {metric: (G, G)} :func:`verify.patches.patch_scores` over each
-        patch's protected non-totem pixels (NaN where a patch has none), for the
-        metrics of ``THRESHOLDS`` (``RANGE``, ``UNSEEN``, ``ABSENT``); a metric
-        without a threshold (e.g. SSIM) is only listed beside each driver. Each metric
-        judges the patches it has a value for.
-    cover : (G, G) fraction of each patch that is protected and not totem.
+        metric's judged pixels (NaN where a patch has none), for the metrics of
+        ``THRESHOLDS`` (``RANGE``, ``UNSEEN``, ``ABSENT``); a metric without a
+        threshold (e.g. SSIM) is only listed beside each driver. Each metric judges the
+        patches it has a value for.
+    cover : (G, G) fraction of each patch that is judged, or {metric: (G, G)} one per
+        metric (each judges where its own evidence holds, :mod:`verify.evidence`).
     grid : the :class:`verify.patches.PatchGrid` (for the drivers' pixel boxes).
     thresholds : {metric: threshold} overriding ``THRESHOLDS``.
     calibration : a :class:`verify.calibration.Calibration` for the p-values, the one
         the package ships (default), or None (no p-value).
+    reference : "none" or "median" (:func:`metric_score`).
+    judged_fraction : the fraction of the photo the metrics judge; below
+        ``min_judged`` a photo that is not inconsistent is ``unverifiable``.
 
     Raises
     ------
@@ -179,30 +197,41 @@ def decide(patch_scores: dict, cover: np.ndarray, grid, *,
     judged = list(limits)
     if not judged:
         raise ValueError(f"no patch scores for any of {sorted(thresholds)}")
-    # Each metric judges the patches it has a value for (CORROB has none where too few
-    # totems see).
-    used_by = {m: np.isfinite(patch_scores[m]) & (cover >= MIN_COVER) for m in judged}
-    if not any(u.any() for u in used_by.values()):
-        used_by = {m: np.isfinite(patch_scores[m]) & (cover > 0) for m in judged}
+    covers = cover if isinstance(cover, dict) else {m: cover for m in judged}
+    used_by = {m: np.isfinite(patch_scores[m]) & (covers[m] >= MIN_COVER) for m in judged}
     judged = [m for m in judged if used_by[m].any()]
-    if not judged:
+    if not judged and judged_fraction is None:
         raise BadInput("the protected region does not reach the image above the totems; "
                        "this photo cannot be verified (move the totems lower or nearer)")
+    if not judged:
+        return _unverifiable(limits, grid, calibration)
     used = np.logical_or.reduce([used_by[m] for m in judged])
     medians, scores, ratios = {}, {}, []
     for m in judged:
-        medians[m], excess_m, scores[m] = metric_score(patch_scores[m], used_by[m])
+        medians[m], excess_m, scores[m] = metric_score(patch_scores[m], used_by[m],
+                                                       reference=reference)
         ratios.append(np.where(used_by[m], excess_m / limits[m], -np.inf))
     ratios = np.stack(ratios)
     excess = np.where(used, ratios.max(axis=0), np.nan)
     worst = np.where(used, ratios.argmax(axis=0), 0)
     score = max(scores[m] / limits[m] for m in judged)
     verdict = "inconsistent" if score > 1.0 else "consistent"
-    limit = top_k(int(used.sum())) if verdict == "consistent" else MAX_DRIVERS
+    if verdict == "consistent" and judged_fraction is not None \
+            and judged_fraction < min_judged:
+        verdict = "unverifiable"
+    limit = MAX_DRIVERS if verdict == "inconsistent" else top_k(int(used.sum()))
     drivers = name_drivers(excess, used, grid, judged, worst, patch_scores, limit)
     p_value, line_p_value = _p_values(score, calibration)
     return Verdict(verdict, score, 1.0, scores, limits, medians, excess, used, drivers,
                    score, p_value, line_p_value)
+
+
+def _unverifiable(limits: dict, grid, calibration) -> Verdict:
+    """The verdict of a photo no metric can judge anywhere."""
+    shape = (grid.n, grid.n)
+    _, line_p = _p_values(1.0, calibration)
+    return Verdict("unverifiable", 0.0, 1.0, {}, limits, {}, np.full(shape, np.nan),
+                   np.zeros(shape, bool), [], 0.0, None, line_p)
 
 
 def _p_values(score: float, calibration):
