@@ -138,6 +138,36 @@ def test_the_totem_rays_judge_the_square_and_a_fit_without_them_still_verifies(
     assert report["metrics"]["patch_ap_UNSEEN"] == report["metrics"]["patch_ap_CHROMA"]
 
 
+def test_a_square_one_totem_sees_is_not_judged_and_the_report_says_so(
+        verified, tampered, tmp_path):
+    """The same square: judged and caught where the totems resolve the surface; with the
+    rays of one totem only (no surface seen twice), not judged: unverifiable, exit 4,
+    none of its pixels judged and no driver on it."""
+    fit_dir = verified[0] / "fit"
+    proc = totems("verify", tampered, "--fit", fit_dir, "--out", tmp_path / "all")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "all" / "verify" / "report.json").read_text())
+    assert report["metrics"]["manip_judged"] > 0.25 and report["judged_fraction"] > 0.2
+    judged = folder.read_mask(tmp_path / "all" / "verify" / "judged_mask.png")
+    assert judged.mean() == pytest.approx(report["judged_fraction"], abs=0.05)
+
+    one = tmp_path / "one-totem-fit"
+    shutil.copytree(fit_dir, one)
+    rays = dict(np.load(one / "totem_rays.npz"))
+    keep = rays["totem"] == 0
+    np.savez(one / "totem_rays.npz", **{k: v[keep] for k, v in rays.items()})
+    proc = totems("verify", tampered, "--fit", one, "--out", tmp_path / "one")
+    assert proc.returncode == 4, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "one" / "verify" / "report.json").read_text())
+    assert report["verdict"] == "unverifiable" and report["judged_fraction"] == 0.0
+    assert report["metrics"]["manip_judged"] == 0.0
+    x0, y0, x1, y1 = SQUARE
+    assert not any(d["box"][0] < x1 and d["box"][2] > x0 and d["box"][1] < y1
+                   and d["box"][3] > y0 for d in report["drivers"])
+    page = (tmp_path / "one" / "verify" / "report.html").read_text()
+    assert "Unverifiable" in page
+
+
 def _enlarged(src, out, f: int = 5):
     """A copy of the scene folder ``src`` with every pixel repeated f x f (a photo over
     the working size: 1600 x 1200 from 320 x 240), K for those pixels."""

@@ -304,7 +304,8 @@ def markdown(bench: dict) -> str:
 
 CSV_FIELDS = ["name", "preset", "placement", "kind", "n_totems", "mode", "status", "verdict",
               "score", "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
-              *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error"]
+              "judged_fraction", "manip_judged", *(f"patch_ap_{m}" for m in METRICS),
+              "wall_s", "fit_from", "error"]
 
 
 def csv_text(runs: list[dict]) -> str:

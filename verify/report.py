@@ -99,8 +99,11 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                                   calibration=calibration, judged_fraction=judged_fraction)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
-               "recon_L1": None, "pose_L1": None}
+               "recon_L1": None, "pose_L1": None, "manip_judged": None}
     if scene.manip_mask is not None:
+        manip = np.asarray(scene.manip_mask, bool)
+        metrics["manip_judged"] = float((manip & judged).sum() / manip.sum()) \
+            if manip.any() else None
         labels = patches.patch_labels(scene.manip_mask, grid)
         for name in heat:
             metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
