@@ -37,7 +37,7 @@ own, mapped to the centre by the Jacobian of ``x -> P``: one sd along the line o
 and across it.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
-weighed".
+weighed" and "pose: the mask's share weighed softly, and a sd that covers".
 """
 
 from __future__ import annotations
@@ -50,10 +50,10 @@ from inverse import pose, rim
 from scenes import camera, silhouette
 
 __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
-           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "CONFIRM_SOFT_SD", "SHAPE_QUANT_PX",
-           "TIGHT_WIDTHS", "TIGHT_SOFT_WIDTHS", "NEAR_ITERATIONS", "REFINE_ITERATIONS",
-           "REFINE_WINDOW_PX", "OUTER_PX", "OUTER_SOFT_PX", "AMBIGUITY", "move_of",
-           "edge_share", "POSE_FROM",
+           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "CONFIRM_SOFT_SD",
+           "SHAPE_QUANT_PX", "TIGHT_WIDTHS", "TIGHT_SOFT_WIDTHS", "NEAR_ITERATIONS",
+           "REFINE_ITERATIONS", "REFINE_WINDOW_PX", "OUTER_PX", "OUTER_SOFT_PX",
+           "AMBIGUITY", "move_of", "edge_share", "POSE_FROM",
            "uncertainty_record", "initial_centres", "CombinedPose", "edge_offsets",
            "fit_offsets", "photo_move", "combine_centre", "combined_poses"]
 
@@ -74,7 +74,7 @@ SHAPE_QUANT_PX = 0.25  # rms distance of a pixel-exact mask's outline from a smo
 TIGHT_WIDTHS = 0.2     # the arcs' edges agree on the outline's size to this (1 sd, in
 TIGHT_SOFT_WIDTHS = 0.1  # units of the edge's width), the share falling every this much
 CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd,
-CONFIRM_SOFT_SD = 0.25 # ... and the mask's share falls by exp(-1/2) every this much
+CONFIRM_SOFT_SD = 0.25  # ... and the mask's share falls by exp(-1/2) every this much
 AMBIGUITY = 0.1        # the mixture's variance counts p as if within this of 0 and 1
 
 
