@@ -1,6 +1,7 @@
 """Where a check's time goes: `totems check` of each SCENE, stage by stage.
 
-    python benchmarks/profile_check.py SCENE [SCENE ...] [--against REV] [--no-kernels]
+    python benchmarks/profile_check.py SCENE [SCENE ...] [--against REV] [--pairs N]
+                                       [--no-kernels]
 
 Each photo runs in a fresh process (so its peak memory is its own): the stages of the
 fit and of verify are timed by wrapping the functions that do them (inclusive seconds,
@@ -8,7 +9,9 @@ nested stages indented), and Dr.Jit's kernel history says how much of each stage
 kernels running (the rest is Python, tracing and numpy). ``--against REV`` times the
 plain `totems check` of the code at git revision REV and of this code on the same photo,
 in the same run, one after the other, each in a process of its own (REV from a worktree
-under a temporary folder). Prints a table per photo and a summary: the profiled check's
+under a temporary folder); ``--pairs N`` runs that pair N times, the order alternating,
+and takes the median ratio (on a machine shared with other work one pair's ratio wanders
+by 10-20 %). Prints a table per photo and a summary: the profiled check's
 seconds (the kernel history's reading left out) and peak memory (``--no-kernels`` for
 a peak without the history's copies of every kernel), and with REV both plain checks'
 seconds and their ratio.
@@ -167,10 +170,27 @@ def time_revision(worktree: Path, scene_dir: str, out: str) -> dict:
                           "--quiet"], cwd=worktree, env=env, capture_output=True,
                          text=True)
     seconds = time.perf_counter() - t0
-    if res.returncode not in (0, 1):
+    if res.returncode not in (0, 1, 4):       # a verdict: consistent, not, unverifiable
         raise SystemExit(f"check at {worktree} failed:\n{res.stderr[-2000:]}")
     kb = [ln.split()[1] for ln in res.stderr.splitlines() if ln.startswith("peak_kb ")]
     return {"check_s": seconds, "peak_mb": int(kb[-1]) / 1024 if kb else float("nan")}
+
+
+def _pairs(worktree: Path, scene: str, tmp: Path, n: int) -> dict:
+    """``n`` plain checks of this code and of ``worktree``'s, the order alternating:
+    the median of each one's seconds and of the pairs' ratios, and the peak memory."""
+    import statistics
+
+    runs = {"run": [], "old": []}
+    for k in range(max(1, n)):
+        order = (("run", ROOT), ("old", worktree))
+        for name, code in (order if k % 2 == 0 else order[::-1]):
+            runs[name].append(time_revision(code, scene, str(tmp / f"{name}{k}")))
+    ratios = [a["check_s"] / b["check_s"] for a, b in zip(runs["run"], runs["old"])]
+    med = {k: statistics.median(r["check_s"] for r in v) for k, v in runs.items()}
+    return {"run_s": med["run"], "run_mb": max(r["peak_mb"] for r in runs["run"]),
+            "old_s": med["old"], "old_mb": max(r["peak_mb"] for r in runs["old"]),
+            "ratio": statistics.median(ratios), "ratios": ratios}
 
 
 def _print_profile(p: dict) -> None:
@@ -185,6 +205,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--against", metavar="REV", help="also time `totems check` at REV")
+    ap.add_argument("--pairs", type=int, default=1,
+                    help="with --against: time both checks N times, alternating")
     ap.add_argument("--no-kernels", action="store_true",
                     help="no Dr.Jit kernel history: its IR copies raise the peak memory")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
@@ -208,12 +230,8 @@ def main(argv=None) -> int:
             row = {"scene": Path(scene).name, "check_s": p["check_s"],
                    "peak_mb": p["peak_mb"]}
             if worktree is not None:      # both as a user runs them: a process each
-                where = str(Path(scene).resolve())
-                new = time_revision(ROOT, where, str(tmp / f"run{i}"))
-                old = time_revision(worktree, where, str(tmp / f"old{i}"))
-                row.update(run_s=new["check_s"], run_mb=new["peak_mb"],
-                           old_s=old["check_s"], old_mb=old["peak_mb"],
-                           ratio=new["check_s"] / old["check_s"])
+                row.update(_pairs(worktree, str(Path(scene).resolve()), tmp / str(i),
+                                  args.pairs))
             summary.append(row)
     finally:
         if worktree is not None:
@@ -226,6 +244,8 @@ def main(argv=None) -> int:
         if "old_s" in r:
             line += (f"{r['run_s']:8.1f}{r['run_mb']:8.0f}{r['old_s']:8.1f}"
                      f"{r['old_mb']:8.0f}{r['ratio']:7.2f}")
+            if len(r["ratios"]) > 1:
+                line += "  (" + ", ".join(f"{x:.2f}" for x in r["ratios"]) + ")"
         print(line)
     import statistics
     print(f"median check {statistics.median(r['check_s'] for r in summary):.1f} s")
