@@ -4,8 +4,10 @@ Only the totem pixels are used (never the rest of the photo). The model (see
 :mod:`inverse.integrator`): a totem pixel sees ``T_F C + R_F a`` in linear RGB, ``T_F``
 the Fresnel transmittance of its sphere, ``C`` the grid's radiance along the refracted
 ray, ``R_F = 1 - sqrt(T_F)`` the reflectance of the glass's front and ``a`` one ambient
-linear colour it reflects (fitted). The loss compares in **sRGB**, the space of the photo
-and of the recon L1 metric, so dark regions weigh as they will be judged:
+linear colour it reflects (fitted; with ``mirror``, the grid's own radiance along the
+mirrored ray where that runs forward through the grid). The loss compares in **sRGB**,
+the space of the photo and of the recon L1 metric, so dark regions weigh as they will be
+judged:
 
     loss = photometric MSE (sRGB)
          + TV of density and colour (Plenoxels; squared neighbour differences)
@@ -42,7 +44,7 @@ import numpy as np
 from inverse import view
 from inverse.batches import DeviceRays, photo_terms, ray_batches
 from inverse.fit_files import FitResult, fit_timings, scene_fingerprint
-from inverse.grid import FrustumFrame, frame_for_scene, resample
+from inverse.grid import FrustumFrame, frame_for_scene, resample, stage_res, stage_samples
 from inverse.losses import TotalVariation, outline_term
 from inverse.rays import TotemPixels, TotemRays, exit_rays, refracted_rays, totem_pixels
 from scenes import backend, folder
@@ -84,6 +86,7 @@ class FitSettings:
     batch_rays: int = 4096           # totem rays per step (0: all of them)
     lr_decay: float = 0.1            # the last stage's rates fall to this fraction
     lr_ambient: float = 0.002
+    mirror: bool = False             # the glass reflects the grid's own scene
     stereo: bool = True              # keep stereo's geometry where held-out totems say so
     stereo_res: tuple = (120, 160)   # (rows, columns) of the stereo depth maps
     stereo_slices: int = 128
@@ -154,6 +157,9 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                             far_factor=settings.far_factor)
     itg = _integrator(settings)
     pixels, refl = _usable_pixels(itg, frame, pixels, initial, radius, ior, settings)
+    if settings.mirror:                  # there the grid's reflection, not the ambient's
+        itg.mirror = True
+        refl = np.where(itg.mirrored_numpy(pixels.d_cam, pixels.totem)[1], 0.0, refl)
 
     learn_pose = not fixed_pose
     model = _optimise(itg, frame, pixels, refl, initial, radius, ior, settings,
@@ -170,8 +176,11 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     totem_pred, totem_points = _totem_outputs(itg, frame, pixels, refl, model.ambient,
                                               scene.size)
     t_render = time.perf_counter() - t0
-    rays = exit_rays(itg, centers, radius, pixels.d_cam, pixels.totem, pixels.observed,
-                     refl, ambient)
+    observed = pixels.observed if not itg.mirror else linear_to_srgb(np.clip(
+        srgb_to_linear(pixels.observed) - itg.mirrored_numpy(pixels.d_cam, pixels.totem)[0],
+        0.0, None))                      # the exit rays carry the refracted scene alone
+    rays = exit_rays(itg, centers, radius, pixels.d_cam, pixels.totem, observed, refl,
+                     ambient)
 
     t0 = time.perf_counter()
     geometry = {"chosen": "grid", "holdout_L1": {}}
@@ -298,11 +307,11 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     centers, pose_on = initial.copy(), False
     bar = _progress_bar(total_steps) if progress else None
     for k, (frac, n_steps) in enumerate(stages):
-        density = resample(density, _stage_res(settings.density_res, frac))
+        density = resample(density, stage_res(settings.density_res, frac))
         colour = resample(colour, (settings.colour_res[0],)
-                          + _stage_res(settings.colour_res[1:], frac))
+                          + stage_res(settings.colour_res[1:], frac))
         itg.setup(frame, density, colour, centers, radius, ior)
-        itg.n_samples = _stage_samples(settings.n_samples, frac)
+        itg.n_samples = stage_samples(settings.n_samples, frac)
         params = mi.traverse(itg)
         opt = mi.ad.Adam(lr=settings.lr_density)
         opt["density"] = params["density"]
@@ -366,22 +375,11 @@ def _backend_step(loss, opt, params) -> None:
     params.update(opt)
 
 
-def _stage_samples(n: int, frac: float) -> int:
-    """Samples per ray in a stage: as the depth resolution, ``n`` scaled by the stage's
-    fraction (at least 16)."""
-    return max(16, int(round(n * frac)))
-
-
 def _decay(opt, settings: FitSettings, factor: float) -> None:
     """Set every learning rate to ``factor`` times its setting."""
     rates = {"density": settings.lr_density, "colour": settings.lr_colour,
              "ambient": settings.lr_ambient, "centers": settings.lr_pose}
     opt.set_learning_rate({k: r * factor for k, r in rates.items() if k in opt.keys()})
-
-
-def _stage_res(res, frac) -> tuple:
-    """A grid resolution scaled by a stage's fraction (at least 2 cells an axis)."""
-    return tuple(max(2, int(round(r * frac))) for r in res)
 
 
 def _progress_bar(total: int):

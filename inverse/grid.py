@@ -28,7 +28,8 @@ import numpy as np
 from scenes.camera import project
 from scenes.errors import BadInput
 
-__all__ = ["FrustumFrame", "frame_for_scene", "resample", "cells_to_pixels"]
+__all__ = ["FrustumFrame", "frame_for_scene", "resample", "stage_res", "stage_samples",
+           "cells_to_pixels"]
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,18 @@ def frame_for_scene(K, size, centers, radius, *, margin: float = 0.15,
     mu, mv = margin * W, margin * H
     return FrustumFrame(np.asarray(K, dtype=np.float64), (-0.5 - mu, W - 0.5 + mu),
                         (-0.5 - mv, H - 0.5 + mv), near, far)
+
+
+def stage_res(res, frac) -> tuple:
+    """A grid resolution scaled by a coarse-to-fine stage's fraction (at least 2 cells
+    an axis)."""
+    return tuple(max(2, int(round(r * frac))) for r in res)
+
+
+def stage_samples(n: int, frac: float) -> int:
+    """Samples per ray in a stage: as the depth resolution, ``n`` scaled by the stage's
+    fraction (at least 16)."""
+    return max(16, int(round(n * frac)))
 
 
 def resample(values: np.ndarray, shape) -> np.ndarray:

@@ -29,6 +29,13 @@ which is evenly spaced along the ray (the map is projective). ``delta`` is the
 segment's length in units of 1/100 of the grid's depth extent, so densities do not
 change meaning when the grid is refined.
 
+With ``mirror`` set, a totem pixel also sees the glass's front reflection of the scene
+itself, ``R_F C_r`` (:meth:`TotemGrid.mirrored`): ``C_r`` the grid's radiance along the
+camera ray mirrored at its entry point, where that ray runs forward through the grid; a
+sphere on a bright table shows the table in its lower half, over the dark wall it
+refracts there. Reflections the grid does not hold (behind the camera, above the view)
+are left to the fit's one ambient colour.
+
 Parameters (``mi.traverse``): ``density`` (nr, nt, ns, 1) raw density before the
 softplus; ``colour`` (nr', nt', ns', 3) linear RGB; ``centers`` (3 n floats, metres,
 camera frame; x of every totem, then y, then z). Construction option (props):
@@ -45,7 +52,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from inverse.grid import FrustumFrame
-from inverse.sphere import totem_rays
+from inverse.sphere import intersect, totem_rays
 from scenes import backend
 
 if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
@@ -251,6 +258,7 @@ class TotemGrid:
         self.centers = None
         self.radius = None
         self.ior = None
+        self.mirror = False          # add the front reflection of the grid itself
 
     # ------------------------------------------------------------------ parameters
 
@@ -354,7 +362,44 @@ class TotemGrid:
         g0_l = mi.Point3f(*[dr.repeat(g0[a], n) for a in range(3)])
         g1_l = mi.Point3f(*[dr.repeat(g1[a], n) for a in range(3)])
         C, w, m = march(self.density, self.colour, g0_l, g1_l, n, jitter=jitter)
-        return C * T_F, valid, w, m, g0_l, g1_l
+        L = C * T_F
+        if self.mirror:
+            L = L + self.mirrored(d_cam, totem_index, T_F)[0]
+        return L, valid, w, m, g0_l, g1_l
+
+    def mirrored(self, d_cam, totem_index, T_F):
+        """The front reflection of the scene the grid holds, per ray: ``R_F C_r``
+        (mi.Color3f, linear RGB), ``R_F = 1 - sqrt(T_F)`` (the two surfaces alike) and
+        ``C_r`` the grid marched along the camera ray mirrored where it enters its
+        sphere, where that ray goes away from the camera and not out through the top
+        face (behind, the near plane's colour is not the scene's); and that mask
+        (mi.Bool). The sphere's geometry is detached: the reflection fits the scene,
+        not the pose."""
+        dr, mi = backend.modules()
+        d, idx = device_rays(d_cam, totem_index)
+        P = dr.detach(select_center(self.center_array(), idx))
+        R = dr.gather(mi.Float, self.radius, idx)
+        t_near, _, _ = intersect(mi.Point3f(0.0), d, P, R)
+        X = dr.detach(t_near) * d
+        N = dr.normalize(mi.Vector3f(X - P))
+        r = d - 2.0 * dr.dot(d, N) * N
+        g0, g1, inside = ray_segment(self.fc, mi.Point3f(X + 1e-4 * N), r)
+        ok = inside & ~leaves_through_top(g1) & (r.z > 0.0)
+        n = max(16, self.n_samples // 2)
+        g0_l = mi.Point3f(*[dr.repeat(g0[a], n) for a in range(3)])
+        g1_l = mi.Point3f(*[dr.repeat(g1[a], n) for a in range(3)])
+        C, _, _ = march(self.density, self.colour, g0_l, g1_l, n)
+        R_F = 1.0 - dr.sqrt(dr.clip(dr.detach(T_F), 0.0, 1.0))
+        return dr.select(ok, R_F * C, 0.0), ok
+
+    def mirrored_numpy(self, d_cam, totem_index):
+        """:meth:`mirrored` at the current centres without gradients: (m, 3) linear RGB
+        and (m,) bool."""
+        dr = backend.modules()[0]
+        with dr.suspend_grad():
+            _, _, T_F, _ = self.refract(d_cam, totem_index)
+            L, ok = self.mirrored(d_cam, totem_index, T_F)
+            return np.asarray(L).T.copy(), np.asarray(ok, bool)
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         """One camera ray per lane (camera frame = world frame), marched through the

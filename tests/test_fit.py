@@ -443,3 +443,36 @@ def test_two_fits_of_one_photo_agree_to_the_last_bit(small_scene):
         assert np.array_equal(a.grid[k], b.grid[k])
     assert np.array_equal(a.recon, b.recon) and np.array_equal(a.recon_depth, b.recon_depth)
     assert a.geometry == b.geometry
+
+
+def test_mirror_adds_the_fresnel_weighted_grid_along_the_forward_mirrored_ray():
+    """With ``mirror`` set, a totem pixel gains R_F times the grid's colour along the
+    camera ray mirrored at its entry point (computed here by hand), where that ray goes
+    forward; a grid of one colour, opaque everywhere, makes that colour what it sees."""
+    from inverse.integrator import TotemGridIntegrator
+
+    frame = frame_for_scene(K, (W, H), CENTERS, RADIUS)
+    grey = np.array([0.2, 0.5, 0.8], np.float32)
+    itg = TotemGridIntegrator(mi.Properties()).setup(
+        frame, np.full((6, 8, 10, 1), 30.0, np.float32),
+        np.broadcast_to(grey, (1, 8, 10, 3)).copy(), CENTERS, RADIUS, IOR)
+    itg.n_samples = 32
+    d, j = _sphere_pixels(0, step=1)
+    base = np.asarray(itg.render_totem_rays(d, j)[0]).T
+    itg.mirror = True
+    gain = np.asarray(itg.render_totem_rays(d, j)[0]).T - base
+    added, ok = itg.mirrored_numpy(d, j)
+    np.testing.assert_allclose(gain, added, atol=1e-6)
+    P, R = CENTERS[0], RADIUS[0]
+    b = d @ P
+    t = b - np.sqrt(b ** 2 - (P @ P - R ** 2))
+    N = (d * t[:, None] - P) / R
+    r = d - 2.0 * (d * N).sum(1)[:, None] * N
+    T = np.asarray(itg.refract(d, j)[2])
+    forward = r[:, 2] > 0.02
+    assert forward.sum() > 10 and (~forward).sum() > 10
+    assert not ok[r[:, 2] < -0.02].any()            # towards the camera: the ambient's
+    sure = forward & ok
+    assert sure.sum() > 0.5 * forward.sum()
+    np.testing.assert_allclose(added[sure], (1.0 - np.sqrt(T))[sure, None] * grey,
+                               rtol=1e-3, atol=1e-6)
