@@ -157,7 +157,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                             far_factor=settings.far_factor)
     itg = _integrator(settings)
     pixels, refl = _usable_pixels(itg, frame, pixels, initial, radius, ior, settings)
-    if settings.mirror:                  # there the grid's reflection, not the ambient's
+    refl_all = refl                      # the exit rays take the ambient's reflection off
+    if settings.mirror:                  # the fit: there the grid's reflection instead
         itg.mirror = True
         refl = np.where(itg.mirrored_numpy(pixels.d_cam, pixels.totem)[1], 0.0, refl)
 
@@ -176,11 +177,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
     totem_pred, totem_points = _totem_outputs(itg, frame, pixels, refl, model.ambient,
                                               scene.size)
     t_render = time.perf_counter() - t0
-    observed = pixels.observed if not itg.mirror else linear_to_srgb(np.clip(
-        srgb_to_linear(pixels.observed) - itg.mirrored_numpy(pixels.d_cam, pixels.totem)[0],
-        0.0, None))                      # the exit rays carry the refracted scene alone
-    rays = exit_rays(itg, centers, radius, pixels.d_cam, pixels.totem, observed, refl,
-                     ambient)
+    rays = exit_rays(itg, centers, radius, pixels.d_cam, pixels.totem, pixels.observed,
+                     refl_all, ambient)
 
     t0 = time.perf_counter()
     geometry = {"chosen": "grid", "holdout_L1": {}}
