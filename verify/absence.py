@@ -55,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from scenes.camera import pixel_rays, project
+from scenes.camera import project
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
 from inverse.sweep import slice_colours
@@ -126,24 +126,6 @@ def line_absence(o, d, colour, image, valid, K, *, step_px: float = STEP_PX,
     return np.where(np.isfinite(best), best, np.nan)
 
 
-def _resolved(sc, frame, res, centers, spacing, min_parallax) -> np.ndarray:
-    """(nk, nt, ns) bool: the slice points that two of the totems landing there see
-    with a parallax of at least ``min_parallax`` (:func:`verify.evidence.pair_parallax`)."""
-    uu, vv = corroborate.cell_centres(frame, res)
-    r = pixel_rays(frame.K, uu.ravel(), vv.ravel())
-    r = r / r[:, 2:3]
-    n = len(centers)
-    out = np.zeros(sc.land.shape[1:], bool)
-    for k, z in enumerate(np.asarray(sc.z, np.float64)):
-        seen = np.zeros((n, out[k].size), bool)
-        seen[:min(n, len(sc.land))] = sc.land[:n, k].reshape(min(n, len(sc.land)), -1)
-        if seen.sum(axis=0).max() < 2:
-            continue
-        par = evidence.pair_parallax(r * z, centers, spacing, seen)
-        out[k] = (par >= min_parallax).reshape(out.shape[1:])
-    return out
-
-
 def in_view(d, K, size) -> np.ndarray:
     """(m,) bool: directions whose vanishing point lies in the image (the ray, leaving a
     point inside the frustum, then stays inside it)."""
@@ -211,8 +193,8 @@ def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *
         behind = inv[:, None, None] < 1.0 / zc[None] - behind_slices * step
         per = np.where(behind[None], -np.inf, per)
     if min_parallax > 0 and centers is not None:
-        per = np.where(_resolved(sc, frame, res, centers, spacing, min_parallax)[None],
-                       per, -np.inf)
+        resolved = evidence.slice_parallax(sc, frame, centers, spacing) >= min_parallax
+        per = np.where(resolved[None], per, -np.inf)
     kth = -np.sort(-per, axis=0)[min_totems - 1]               # (nk, nt, ns)
     cells = kth.max(axis=0)
     return cells_to_pixels(np.where(np.isfinite(cells), cells, np.nan), frame, (W, H))

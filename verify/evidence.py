@@ -1,30 +1,37 @@
 """The evidence map: what the totems establish at each pixel of the photo.
 
-The verdict may only judge a pixel where the totems' rays support it. Per pixel ``p``
-of the camera view, with ``X(p)`` the surface point at the fit's depth there
-(``FitResult.recon_depth``, camera-frame ``z``, metres):
+The verdict may only judge a pixel where the totems' rays support it. A pixel's camera
+ray is cut by depth slices (even in inverse depth, :func:`inverse.sweep.slice_colours`
+over the cells of :mod:`verify.corroborate`'s map); at each slice point the rays of
+each totem that pass there carry a colour. The totems establish the pixel's surface
+where, at some depth along its ray:
 
-``n_totems``  how many totems saw that surface: a totem sees it when one of its rays,
-              leaving the glass and marched through the camera's depth map, first
-              meets the surface the camera sees at ``p`` (:func:`ray_hits`; a surface
-              hidden from the totem by a nearer one the camera sees is not reached);
-``parallax``  from how far apart they saw it: the largest angle at ``X(p)`` between two
-              of those totems' centres, in units of their rays' angular spacing
-              (:func:`angular_spacing`). Triangulated from two totems, the surface's
-              depth is known to about ``1 / parallax`` of itself, so a surface seen
-              with a parallax below ``MIN_PARALLAX`` (a far backdrop, the horizon, a
-              wall every totem sees from one side) has no resolved depth.
+- at least ``MIN_TOTEMS`` totems' rays pass (one sees any colour it likes),
+- two of them see the point from far enough apart that its depth is fixed: their
+  *parallax*, the angle at the point between the totems' centres divided by their
+  rays' angular spacing (:func:`angular_spacing`), is at least ``MIN_PARALLAX``
+  (triangulated from two totems, a depth is known to about ``1 / parallax`` of itself),
+- and they agree on what they see there (the spread of their sRGB colours at most
+  ``AGREE``): they saw one surface.
 
-A pixel's surface is *resolved* when at least ``MIN_TOTEMS`` totems saw it with a
-parallax of at least ``MIN_PARALLAX``. RANGE and UNSEEN judge only resolved pixels
-(:mod:`verify.verdict`); ABSENT judges the points in front of the surface where its
-three totems resolve depth (:func:`verify.absence.absence`, ``min_parallax``).
+Per pixel: ``n_totems`` the most totems meeting these at one depth, ``parallax`` the
+largest parallax among them, ``resolved`` whether any depth meets them. Only the totem
+pixels enter, so no edit outside the totems changes the map. A backdrop far away (the
+sky, the horizon) is seen by every totem along one direction, with no parallax, and is
+not resolved; nor is a surface the totems see in different places (a painting hidden
+from them behind an object). Limits: each totem's colour at a slice point is the mean
+of its rays there, so in front of a finely textured surface, or anywhere before a
+surface of one colour, the totems can agree on a blur they did not see at one point;
+the map then says more is established than is. Any one of 64 depths may agree: two
+totems that see unrelated smooth colours agree somewhere on about a fifth of the
+photo's cells (``tests/test_evidence.py``). RANGE and UNSEEN judge the resolved pixels
+(:mod:`verify.verdict`); ABSENT judges the slice points whose landing totems resolve
+depth (:func:`verify.absence.absence`, ``min_parallax``).
 
-Screen-space marching is how real-time renderers trace reflections against a depth
-buffer; it needs no geometry beyond the view the fit already rebuilt, and it sees the
-occlusions that view holds. Limits: it does not know what the camera does not see (a
-ray passing behind an object from the camera's side is taken to continue), nor the
-totems' own occlusion of each other.
+The fit's own depth was not used: its grid often puts a near floor at the far plane
+(a far backdrop explains each ray on its own), and the map built on it judged a fifth
+of the photo (see docs/decisions.md, 'evidence: the totems' agreement, not the fit's
+depth').
 """
 
 from __future__ import annotations
@@ -32,15 +39,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
+from inverse.sweep import slice_colours
 from scenes.camera import pixel_rays
+from scenes.colour import linear_to_srgb
+from verify.corroborate import CELL_PX, N_SLICES, SIGMA_CELLS, cell_centres, map_res
 
-__all__ = ["MIN_TOTEMS", "MIN_PARALLAX", "COS_EVIDENCE", "CELL_PX", "N_STEPS",
-           "THICKNESS", "Evidence", "angular_spacing", "pair_parallax", "ray_hits",
-           "evidence_map"]
+__all__ = ["MIN_TOTEMS", "MIN_PARALLAX", "AGREE", "COS_EVIDENCE", "Evidence",
+           "angular_spacing", "pair_parallax", "slice_parallax", "evidence_map"]
 
 MIN_TOTEMS = 2
 """Totems that must see a surface for its pixels to be judged: one sees any colour."""
@@ -49,20 +58,14 @@ MIN_PARALLAX = 4.0
 """Parallax (rays' angular spacings) at which a surface's depth counts as resolved:
 triangulated to about a quarter of its distance."""
 
+AGREE = 0.03
+"""Largest spread (sRGB, root mean square over the landing totems and the channels) at
+which the totems at a point are taken to see one surface there: 0.02 and 0.05 each
+separated the development set's edits less (see docs/decisions.md)."""
+
 COS_EVIDENCE = 0.3
 """Rays that entered their sphere at an incidence cosine below this are not evidence:
 near the rim the glass mixes in reflection and blurs (as :mod:`verify.corroborate`)."""
-
-CELL_PX = 8
-"""Side (pixels) of the cells a totem's hits are counted in: about twice the spacing of
-its rays' hits in a 640 x 480 photo, so a surface a totem sees holds a hit per cell."""
-
-N_STEPS = 192
-"""Samples along each ray, spaced evenly in log distance from the glass."""
-
-THICKNESS = 0.05
-"""A ray meets the camera's surface where it passes behind it by at most this fraction
-of the surface's depth (and at most one step): more is passing behind an occluder."""
 
 
 @dataclass
@@ -131,91 +134,51 @@ def pair_parallax(X: np.ndarray, centers: np.ndarray, spacing: np.ndarray,
     return best
 
 
-def ray_hits(o: np.ndarray, d: np.ndarray, depth: np.ndarray, K: np.ndarray, *,
-             near: float, far: float, n_steps: int = N_STEPS,
-             thickness: float = THICKNESS, chunk: int = 4096) -> np.ndarray:
-    """The pixel where each ray first meets the surface the camera sees.
-
-    Parameters
-    ----------
-    o, d : (m, 3) rays' origins (metres) and unit directions, camera frame (OpenCV).
-    depth : (H, W) the camera view's depth map (camera-frame ``z``, metres).
-    K : (3, 3) intrinsics (pixel (u, v) at image coordinate (u, v)).
-    near, far : the distances (metres) the march covers, from each origin.
-    n_steps, thickness : see the module constants.
-
-    Returns
-    -------
-    (m,) int64 flat pixel index ``v * W + u`` of the hit, -1 where the ray meets no
-    surface of the view (it leaves the image, or passes only behind occluders).
-    """
-    H, W = depth.shape
-    K = np.asarray(K, np.float64)
-    t = np.geomspace(near, far, n_steps)
-    step = t[1] / t[0] - 1.0                         # relative spacing of the samples
-    out = np.full(len(o), -1, np.int64)
-    for a in range(0, len(o), chunk):
-        oo, dd = o[a:a + chunk], d[a:a + chunk]
-        P = oo[:, None, :] + t[None, :, None] * dd[:, None, :]        # (c, n, 3)
-        z = P[..., 2]
-        front = z > 1e-6
-        zs = np.where(front, z, 1.0)
-        u = np.rint((K[0, 0] * P[..., 0] + K[0, 1] * P[..., 1]) / zs + K[0, 2])
-        v = np.rint(K[1, 1] * P[..., 1] / zs + K[1, 2])
-        inside = front & (u >= 0) & (u < W) & (v >= 0) & (v < H)
-        idx = np.where(inside, v * W + u, 0).astype(np.int64)
-        D = depth.ravel()[idx]
-        behind = z - D
-        hit = inside & (behind >= 0) & (behind <= np.maximum(thickness, step) * D)
-        first = np.argmax(hit, axis=1)
-        any_hit = hit[np.arange(len(oo)), first]
-        out[a:a + chunk] = np.where(any_hit, idx[np.arange(len(oo)), first], -1)
+def slice_parallax(sc, frame, centers: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """(nk, nt, ns) the largest parallax (:func:`pair_parallax`) between two totems
+    landing at each slice point of ``sc`` (:class:`inverse.sweep.SliceColours`) over
+    ``frame``'s cells."""
+    nk, nt, ns = sc.land.shape[1:]
+    uu, vv = cell_centres(frame, (nt, ns))
+    r = pixel_rays(frame.K, uu.ravel(), vv.ravel())
+    r = r / r[:, 2:3]
+    n = len(centers)
+    out = np.zeros((nk, nt, ns))
+    for k, z in enumerate(np.asarray(sc.z, np.float64)):
+        seen = np.zeros((n, nt * ns), bool)
+        m = min(n, len(sc.land))
+        seen[:m] = sc.land[:m, k].reshape(m, -1)
+        if seen.sum(axis=0).max() >= 2:
+            out[k] = pair_parallax(r * z, centers, spacing, seen).reshape(nt, ns)
     return out
 
 
-def evidence_map(rays: TotemRays, centers: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                 *, cell_px: int = CELL_PX, min_totems: int = MIN_TOTEMS,
-                 min_parallax: float = MIN_PARALLAX,
-                 cos_evidence: float = COS_EVIDENCE) -> Evidence:
-    """The evidence map of a photo from its fit.
+def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size, *,
+                 min_totems: int = MIN_TOTEMS, min_parallax: float = MIN_PARALLAX,
+                 agree: float = AGREE, cos_evidence: float = COS_EVIDENCE) -> Evidence:
+    """The evidence map of a photo from its totem rays (see the module docstring).
 
     Parameters
     ----------
     rays : the totem pixels' rays leaving the glass (:class:`inverse.rays.TotemRays`).
     centers : (n, 3) fitted totem centres, camera frame, metres.
-    depth : (H, W) the fit's camera-view depth (``FitResult.recon_depth``), metres.
-    K : (3, 3) intrinsics.
-    cell_px, min_totems, min_parallax, cos_evidence : see the module constants.
+    frame : the fit's frustum frame: the map covers its cells and depths.
+    size : (W, H) of the photo in pixels.
+    min_totems, min_parallax, agree, cos_evidence : see the module constants.
     """
-    depth = np.asarray(depth, np.float64)
-    H, W = depth.shape
     centers = np.asarray(centers, np.float64)
-    n = len(centers)
     rays = rays.entering_at_least(cos_evidence)
-    spacing = angular_spacing(rays.d, rays.totem, n)
-    finite = depth[np.isfinite(depth) & (depth > 0)]
-    far = 4.0 * float(finite.max()) if finite.size else 100.0
-    hits = ray_hits(rays.o, rays.d, np.where(np.isfinite(depth), depth, np.inf), K,
-                    near=0.01, far=far)
-    # hits counted per cell and totem; a cell next to a hit counts as seen (the hits
-    # sample the surface at about the cells' spacing)
-    gh, gw = -(-H // cell_px), -(-W // cell_px)
-    seen = np.zeros((n, gh, gw), bool)
-    ok = hits >= 0
-    cy, cx = hits[ok] // W // cell_px, hits[ok] % W // cell_px
-    seen[rays.totem[ok], cy, cx] = True
-    seen = ndimage.binary_dilation(seen, structure=np.ones((1, 3, 3), bool))
-    count = seen.sum(axis=0)
-    # each cell's surface point, at the depth of its centre pixel
-    vc = np.minimum(np.arange(gh) * cell_px + cell_px // 2, H - 1)
-    uc = np.minimum(np.arange(gw) * cell_px + cell_px // 2, W - 1)
-    vv, uu = np.meshgrid(vc, uc, indexing="ij")
-    r = pixel_rays(K, uu.ravel(), vv.ravel())
-    zc = depth[vv.ravel(), uu.ravel()]
-    X = r / r[:, 2:3] * np.where(np.isfinite(zc), zc, 1e6)[:, None]
-    par = pair_parallax(X, centers, spacing, seen.reshape(n, -1)).reshape(gh, gw)
-    par = np.where(np.isfinite(zc).reshape(gh, gw), par, 0.0)
-    up = (np.arange(H)[:, None] // cell_px, np.arange(W)[None, :] // cell_px)
-    n_totems, parallax = count[up], par[up]
+    spacing = angular_spacing(rays.d, rays.totem, len(centers))
+    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
+    sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame,
+                       map_res(frame, CELL_PX), n_slices=N_SLICES, sigma=SIGMA_CELLS)
+    par = slice_parallax(sc, frame, centers, spacing)
+    n_land, _, var = sc.consistency              # var: summed over the 3 channels
+    ok = (n_land >= min_totems) & (par >= min_parallax) & (var <= 3.0 * agree ** 2)
+    n_cell = np.where(ok, n_land, 0).max(axis=0).astype(np.float64)
+    p_cell = np.where(ok, par, 0.0).max(axis=0)
+    W, H = size
+    n_totems = np.rint(cells_to_pixels(n_cell, frame, (W, H), nearest=True))
+    parallax = cells_to_pixels(p_cell, frame, (W, H), nearest=True)
     resolved = (n_totems >= min_totems) & (parallax >= min_parallax)
     return Evidence(n_totems.astype(np.int64), parallax, resolved, spacing)

@@ -136,11 +136,12 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
 
 def _evidence(scene: folder.Scene, fit) -> evidence.Evidence | None:
     """The evidence map of the photo (:mod:`verify.evidence`), None for a fit without
-    rays or depth (written before they were kept: every protected pixel is judged)."""
-    rays, depth = getattr(fit, "rays", None), getattr(fit, "recon_depth", None)
-    if rays is None or depth is None:
+    rays (written before they were kept: every protected pixel is judged)."""
+    rays = getattr(fit, "rays", None)
+    if rays is None:
         return None
-    return evidence.evidence_map(rays, fit.centers, depth, scene.K)
+    H, W = np.asarray(scene.image).shape[:2]
+    return evidence.evidence_map(rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H))
 
 
 def _pixel_errors(scene, fit, image, recon, totem_mask, ev) -> dict:
