@@ -3,6 +3,7 @@
     python benchmarks/make_set.py --set calibration --out CAL --jobs 2
     totems bench CAL --out BENCH --jobs 2 --no-table1      # or --reverify after verify/
     python benchmarks/calibrate_verdict.py BENCH... [--write verify/calibration.json]
+        [--set development --skip-edited] [--line-at 0.05]
 
 Reads every untouched photo's statistic (``report.json`` ``statistic``) from benches of
 the calibration set, refuses photos that are manipulated or whose seed belongs to
@@ -126,15 +127,25 @@ def main(argv=None) -> int:
                    help="output folders of `totems bench` on the set")
     p.add_argument("--write", type=Path, default=None,
                    help="write the calibration here (the package's: verify/calibration.json)")
+    p.add_argument("--set", default="calibration", choices=sorted(sets.SEEDS),
+                   help="the set the photos belong to (default calibration; another set "
+                        "gives an interim calibration, named so in its source)")
+    p.add_argument("--skip-edited", action="store_true",
+                   help="leave out the manipulated photos of the benches (a set with edits)")
+    p.add_argument("--line-at", type=float, default=None, metavar="P",
+                   help="also print the factor to multiply the thresholds by so that the "
+                        "line (score 1) falls at p = P")
     args = p.parse_args(argv)
     try:
         rows = [row for bench in args.bench for row in collect(bench)]
-        check_rows(rows)
+        if args.skip_edited:
+            rows = [r for r in rows if not r["manipulated"]]
+        check_rows(rows, args.set)
     except BadInput as e:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
         return 2
     seeds = sorted({r["seed"] for r in rows})
-    source = {"set": "calibration", "photos": len(rows),
+    source = {"set": args.set, "photos": len(rows),
               "seeds": f"{seeds[0]}-{seeds[-1]}",
               "presets": sorted({r["preset"] for r in rows}),
               "channels": sorted({r["channel"] for r in rows}),
@@ -142,6 +153,8 @@ def main(argv=None) -> int:
               "commit": _commit(), "date": date.today().isoformat()}
     cal = calibration.fit_tail([r["statistic"] for r in rows], source=source)
     print(report(rows, cal))
+    if args.line_at is not None:
+        print(f"thresholds x {cal.line(args.line_at):.4f} put the line at p = {args.line_at}")
     if args.write:
         folder.write_json(args.write, cal.to_json())
         print(f"wrote {args.write}")

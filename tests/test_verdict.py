@@ -61,6 +61,22 @@ def test_either_metric_over_its_threshold_decides():
     assert d.verdict == "consistent" and d.score == pytest.approx(0.2 / 0.25)
 
 
+def test_a_photo_edited_more_never_scores_lower():
+    # the same square, then the same square and three more squares of a paler colour
+    # over much of the view: the more edited photo scores at least as high
+    photo = texture()
+    one = with_square(photo)
+    more = one
+    for box in ((20, 20, 84, 84), (230, 30, 300, 100), (40, 120, 120, 170)):
+        more = with_square(more, colour=(0.6, 0.5, 0.9), box=box)
+    a, b = (verify_scene(make_scene(x), make_fit(photo), calibration=None)
+            for x in (one, more))
+    assert a.verdict == "inconsistent"
+    assert b.score >= a.score - 1e-6               # float32 patch sums
+    for m in a.decision.scores:
+        assert b.decision.scores[m] >= a.decision.scores[m] - 1e-6
+
+
 def test_noisy_recon_is_consistent():
     photo = texture()
     rng = np.random.default_rng(1)
