@@ -224,6 +224,8 @@ def _print_summary(verb: str, summary: dict) -> None:
         print(f"{summary['verdict']}: {odds}score {summary['score']:.2f} of "
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
+              + ("" if summary.get("judged_fraction") is None else
+                 f", judged {100 * summary['judged_fraction']:.0f}%")
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
     elif verb == "masks":
         how = "proposed" if summary["proposed"] else "as drawn"
