@@ -74,7 +74,7 @@ def test_clopper_pearson_and_held_out_groups():
 def test_the_verdict_reports_the_p_values_beside_its_line():
     g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
     cal = calibration.fit_tail(np.linspace(0.1, 2.0, 50))
-    base = np.full((10, 10), 0.1)
+    base = np.zeros((10, 10))
     for bump in (0.05, 0.3, 0.6):
         s = base.copy()
         s[0, :3] += bump
@@ -129,9 +129,11 @@ def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys
     assert "| window | 8 |" in printed and "| pristine |" not in printed
 
 
-def test_the_shipped_calibration_reads():
+def test_the_shipped_calibration_reads_and_puts_the_line_near_five_percent():
     cal = calibration.load()
-    assert cal.n >= 60 and cal.source["set"] == "calibration"
-    assert cal.source["seeds"] == "11-18"
-    assert len(cal.source["presets"]) == 5 and len(cal.source["channels"]) == 7
+    assert cal.n >= 20 and cal.source["set"] == "calibration"
+    first, last = map(int, cal.source["seeds"].split("-"))
+    assert 11 <= first <= last <= 18 and len(cal.source["presets"]) == 5
     assert cal.p_value(cal.line()) == pytest.approx(calibration.ALPHA, rel=1e-6)
+    # the verdict's line (score 1): the word and the p-value agree, about 5 %
+    assert 0.02 <= cal.p_value(1.0) <= 0.1
