@@ -219,9 +219,9 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
 def _unverifiable(limits: dict, grid, calibration) -> Verdict:
     """The verdict of a photo no metric can judge anywhere."""
     shape = (grid.n, grid.n)
-    _, line_p = _p_values(1.0, calibration)
+    p_value, line_p = _p_values(0.0, calibration)
     return Verdict("unverifiable", 0.0, 1.0, {}, limits, {}, np.full(shape, np.nan),
-                   np.zeros(shape, bool), [], 0.0, None, line_p)
+                   np.zeros(shape, bool), [], 0.0, p_value, line_p)
 
 
 def _p_values(score: float, calibration):
