@@ -27,8 +27,10 @@ class Report:
     ``silhouettes`` (n, H, W) bool, each fitted sphere's image (the outlines report.html
     draws; None when unknown). ``scene_name``: the scene folder's name, for report.html.
     Neither is in report.json. ``judged`` (H, W) bool, the pixels RANGE and UNSEEN judge
-    (the protected region where the evidence map resolves the surface); ``evidence``
-    the :class:`verify.evidence.Evidence` map (None for a fit without rays or depth).
+    (the protected region where the evidence map resolves the surface; written as
+    judged_mask.png) and ``judged_fraction`` its share of the non-totem pixels (in
+    report.json); ``evidence`` the :class:`verify.evidence.Evidence` map (None for a fit
+    without totem rays).
     """
 
     verdict: str
@@ -54,14 +56,8 @@ class Report:
     scene_name: str = ""
     scale: int = 1
     judged: np.ndarray | None = None
+    judged_fraction: float | None = None
     evidence: object = None
-
-    @property
-    def judged_fraction(self) -> float | None:
-        """Fraction of the photo's non-totem pixels RANGE and UNSEEN judge."""
-        if self.judged is None:
-            return None
-        return float(self.judged.sum() / max((~self.totem_mask).sum(), 1))
 
     @property
     def drivers(self) -> list:

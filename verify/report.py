@@ -131,7 +131,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
-        judged=judged, evidence=ev)
+        judged=judged, judged_fraction=judged_fraction, evidence=ev)
 
 
 def _evidence(scene: folder.Scene, fit) -> evidence.Evidence | None:
