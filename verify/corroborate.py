@@ -55,7 +55,7 @@ from verify.patches import chroma
 from verify.resolution import blur_varying
 
 __all__ = ["CELL_PX", "N_SLICES", "SIGMA_CELLS", "COS_EVIDENCE", "MIN_TOTEMS",
-           "map_res", "cell_centres", "cell_errors", "corroboration", "unseen"]
+           "map_res", "cell_centres", "cell_errors", "corroboration", "ray_slices", "unseen"]
 
 CELL_PX = 5.2
 """Side (pixels) of the map's cells over the fit's frustum: the fit's stereo maps have
@@ -127,7 +127,8 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.n
 def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
                   cell_px: float = CELL_PX, n_slices: int = N_SLICES,
                   sigma: float = SIGMA_CELLS, cos_evidence: float = COS_EVIDENCE,
-                  min_totems: int = MIN_TOTEMS, photo_sigma=None) -> np.ndarray:
+                  min_totems: int = MIN_TOTEMS, photo_sigma=None,
+                  slices=None) -> np.ndarray:
     """How far each photo pixel's hue is from what ``min_totems`` totems saw along its ray.
 
     Parameters
@@ -139,6 +140,8 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     photo_sigma : the photo's blur (pixels, a number or an (H, W) map,
         :mod:`verify.resolution`), never less than the rays' splat ``sigma * cell_px``
         (the default).
+    slices : :func:`ray_slices` of these rays with these settings, when already made
+        (the evidence map reads the same).
 
     Returns
     -------
@@ -150,15 +153,26 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
     if rays.n_totems() < min_totems:
         return np.full((H, W), np.nan)
     res = map_res(frame, cell_px)
-    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
-    sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame, res, n_slices=n_slices,
-                       sigma=sigma)
+    sc = slices if slices is not None else ray_slices(
+        rays, frame, cell_px=cell_px, n_slices=n_slices, sigma=sigma)
     splat_px = sigma * cell_px
     blurred = blur_varying(chroma(image), splat_px if photo_sigma is None
                            else np.maximum(photo_sigma, splat_px))
     uu, vv = cell_centres(frame, res)
     E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
     return cells_to_pixels(E, frame, (W, H))
+
+
+def ray_slices(rays: TotemRays, frame: FrustumFrame, *, cell_px: float = CELL_PX,
+               n_slices: int = N_SLICES, sigma: float = SIGMA_CELLS,
+               cos_evidence: float = COS_EVIDENCE):
+    """Each totem's mean sRGB colour per depth slice and cell of the map
+    (:func:`inverse.sweep.slice_colours`), from its rays entering at an incidence cosine
+    of at least ``cos_evidence``."""
+    rays = rays.entering_at_least(cos_evidence)
+    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
+    return slice_colours(rays.o, rays.d, colour, rays.totem, frame,
+                         map_res(frame, cell_px), n_slices=n_slices, sigma=sigma)
 
 
 def unseen(chroma_distance, corroboration) -> np.ndarray:

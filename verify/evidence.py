@@ -43,10 +43,8 @@ from scipy.spatial import cKDTree
 
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
-from inverse.sweep import slice_colours
 from scenes.camera import pixel_rays
-from scenes.colour import linear_to_srgb
-from verify.corroborate import CELL_PX, N_SLICES, SIGMA_CELLS, cell_centres, map_res
+from verify.corroborate import cell_centres, ray_slices
 
 __all__ = ["MIN_TOTEMS", "MIN_PARALLAX", "AGREE", "COS_EVIDENCE", "Evidence",
            "angular_spacing", "pair_parallax", "slice_parallax", "evidence_map"]
@@ -155,7 +153,8 @@ def slice_parallax(sc, frame, centers: np.ndarray, spacing: np.ndarray) -> np.nd
 
 def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size, *,
                  min_totems: int = MIN_TOTEMS, min_parallax: float = MIN_PARALLAX,
-                 agree: float = AGREE, cos_evidence: float = COS_EVIDENCE) -> Evidence:
+                 agree: float = AGREE, cos_evidence: float = COS_EVIDENCE,
+                 slices=None) -> Evidence:
     """The evidence map of a photo from its totem rays (see the module docstring).
 
     Parameters
@@ -165,13 +164,14 @@ def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size
     frame : the fit's frustum frame: the map covers its cells and depths.
     size : (W, H) of the photo in pixels.
     min_totems, min_parallax, agree, cos_evidence : see the module constants.
+    slices : :func:`verify.corroborate.ray_slices` of these rays, when already made
+        (CORROB reads the same).
     """
     centers = np.asarray(centers, np.float64)
     rays = rays.entering_at_least(cos_evidence)
     spacing = angular_spacing(rays.d, rays.totem, len(centers))
-    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
-    sc = slice_colours(rays.o, rays.d, colour, rays.totem, frame,
-                       map_res(frame, CELL_PX), n_slices=N_SLICES, sigma=SIGMA_CELLS)
+    sc = slices if slices is not None else ray_slices(rays, frame,
+                                                      cos_evidence=cos_evidence)
     par = slice_parallax(sc, frame, centers, spacing)
     n_land, _, var = sc.consistency              # var: summed over the 3 channels
     ok = (n_land >= min_totems) & (par >= min_parallax) & (var <= 3.0 * agree ** 2)

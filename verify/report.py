@@ -80,8 +80,12 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                                         shape=region_shape)
     grid = patches.patch_grid(totem_mask)
     seen = protected & ~totem_mask
-    ev = _evidence(scene, fit)
-    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev)
+    rays = getattr(fit, "rays", None)    # None: a fit from before they were kept
+    slices = None if rays is None else corroborate.ray_slices(
+        rays, FrustumFrame.from_dict(fit.grid))
+    ev = None if rays is None else evidence.evidence_map(
+        rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices)
+    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices)
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     keep = patches.patch_fraction(seen, grid) > 0
 
@@ -134,19 +138,10 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         judged=judged, judged_fraction=judged_fraction, evidence=ev)
 
 
-def _evidence(scene: folder.Scene, fit) -> evidence.Evidence | None:
-    """The evidence map of the photo (:mod:`verify.evidence`), None for a fit without
-    rays (written before they were kept: every protected pixel is judged)."""
-    rays = getattr(fit, "rays", None)
-    if rays is None:
-        return None
-    H, W = np.asarray(scene.image).shape[:2]
-    return evidence.evidence_map(rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H))
-
-
-def _pixel_errors(scene, fit, image, recon, totem_mask, ev) -> dict:
+def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices) -> dict:
     """Every metric's per-pixel map (:mod:`verify.patches`), CORROB and ABSENT from the
-    totem rays when the fit has them, UNSEEN from CHROMA and CORROB."""
+    totem rays when the fit has them (CORROB from ``slices``,
+    :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB."""
     H, W = image.shape[:2]
     # the photo is compared at the evidence's resolution (verify.resolution)
     spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
@@ -158,7 +153,7 @@ def _pixel_errors(scene, fit, image, recon, totem_mask, ev) -> dict:
     if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)
         errors["CORROB"] = corroborate.corroboration(rays, frame, image,
-                                                     photo_sigma=hue_sigma)
+                                                     photo_sigma=hue_sigma, slices=slices)
         errors["ABSENT"] = absence.absence(
             rays, frame, image, totem_mask, scene.K, getattr(fit, "recon_depth", None),
             centers=fit.centers, spacing=None if ev is None else ev.spacing,
