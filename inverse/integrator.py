@@ -59,7 +59,8 @@ if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the fir
     import mitsuba as mi
 
 __all__ = ["DELTA_SCALE", "softplus", "FrameConstants", "ray_segment", "device_rays",
-           "leaves_through_top", "march", "distortion", "select_center", "TotemGrid",
+           "leaves_through_top", "density_at", "march", "distortion", "select_center",
+           "TotemGrid",
            "integrator_class"]
 
 #: Length, in unit grid coordinates, of one unit of ``delta`` (density is per 1/100).
@@ -156,6 +157,38 @@ def leaves_through_top(g1) -> mi.Bool:
     return (g1.y <= 1e-4) & (g1.z < 1.0 - 1e-4)
 
 
+def density_at(density: mi.Texture3f, p) -> mi.Float:
+    """The raw density at unit grid points ``p`` (mi.Point3f): trilinear between cell
+    centres, clamped at the edges, as ``mi.Texture3f.eval`` (equal to float rounding).
+
+    Eight gathers from the texture's tensor whose adjoint is a plain atomic add
+    (``dr.ReduceMode.Direct``): the texture's own adjoint, an expanded scatter, took
+    twice as long on the backward pass's one thread (docs/decisions.md, "fit: the
+    step's kernels halved").
+    """
+    dr, mi = backend.modules()
+    t = density.tensor()
+    D, H, W = t.shape[:3]
+    x = t.array
+    f = (p.x * W - 0.5, p.y * H - 0.5, p.z * D - 0.5)
+    lo = [dr.floor(a) for a in f]
+    w = [a - b for a, b in zip(f, lo)]                       # weights of the upper cells
+    i0, i1 = [], []
+    for b, n in zip(lo, (W, H, D)):
+        b = mi.Int32(b)
+        i0.append(mi.UInt32(dr.clip(b, 0, n - 1)))
+        i1.append(mi.UInt32(dr.clip(b + 1, 0, n - 1)))
+
+    def at(ix, iy, iz):
+        return dr.gather(mi.Float, x, (iz * H + iy) * W + ix, mode=dr.ReduceMode.Direct)
+
+    planes = []
+    for iz in (i0[2], i1[2]):
+        rows = [dr.lerp(at(i0[0], iy, iz), at(i1[0], iy, iz), w[0]) for iy in (i0[1], i1[1])]
+        planes.append(dr.lerp(rows[0], rows[1], w[1]))
+    return dr.lerp(planes[0], planes[1], w[2])
+
+
 def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
           jitter=None, delta_scale=(DELTA_SCALE, DELTA_SCALE, DELTA_SCALE)):
     """Volume rendering of segments ``g0 -> g1`` given per lane (blocks of ``n``).
@@ -187,7 +220,7 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     p = g0 + m * (g1 - g0)
     seg = mi.Vector3f(g1 - g0) * mi.Vector3f(*delta_scale)
     delta = dr.norm(seg) / n
-    sigma = softplus(density.eval(p)[0])
+    sigma = softplus(density_at(density, p))
     tau = sigma * delta
     c = mi.Color3f(colour.eval(mi.Point2f(p.x, p.y)) if isinstance(colour, mi.Texture2f)
                    else colour.eval(p))
