@@ -14,25 +14,42 @@ __all__ = ["TotalVariation", "outline_term", "support_cells", "support_term"]
 
 class TotalVariation:
     """Squared-difference total variation of a grid tensor ``(D, H, W, C)``: the mean
-    over all pairs of neighbours along the three grid axes (Plenoxels)."""
+    over all pairs of neighbours along the three grid axes (Plenoxels).
+
+    Its gradient, ``2 / count * sum_j (x_i - x_j)`` over each cell's (up to) six
+    neighbours, is computed directly by gathers and attached with ``dr.replace_grad``:
+    differentiating the pairs' gathers made scatter-adds over every pair, a ninth of a
+    fit's step (docs/decisions.md, "fit: the step's kernels halved").
+    """
 
     def __init__(self, shape):
-        mi = backend.modules()[1]
         D, Hh, Ww, C = shape
-        idx = np.arange(D * Hh * Ww * C).reshape(D, Hh, Ww, C)
-        a = [idx[1:].ravel(), idx[:, 1:].ravel(), idx[:, :, 1:].ravel()]
-        b = [idx[:-1].ravel(), idx[:, :-1].ravel(), idx[:, :, :-1].ravel()]
-        self.a = [backend.upload(mi.UInt32, x, np.uint32) for x in a if x.size]
-        self.b = [backend.upload(mi.UInt32, x, np.uint32) for x in b if x.size]
-        self.count = float(max(1, sum(x.size for x in a)))
+        self.shape = (D, Hh, Ww, C)
+        self.count = float(max(1, (D - 1) * Hh * Ww * C + D * (Hh - 1) * Ww * C
+                               + D * Hh * (Ww - 1) * C))
 
     def __call__(self, tensor):
         dr, mi = backend.modules()
         x = tensor.array
-        total = mi.Float(0.0)
-        for a, b in zip(self.a, self.b):
-            total += dr.sum(dr.square(dr.gather(mi.Float, x, a) - dr.gather(mi.Float, x, b)))
-        return total / self.count
+        D, Hh, Ww, C = self.shape
+        with dr.suspend_grad():
+            xd = dr.detach(x)
+            i = dr.arange(mi.UInt32, D * Hh * Ww * C)
+            value, grad = mi.Float(0.0), mi.Float(0.0)
+            for stride, n in ((C, Ww), (C * Ww, Hh), (C * Ww * Hh, D)):
+                pos = (i // stride) % n                        # the cell's index on the axis
+                for up in (True, False):
+                    ok = pos < n - 1 if up else pos > 0
+                    j = dr.select(ok, i + stride if up else i - stride, i)
+                    diff = dr.select(ok, xd - dr.gather(mi.Float, xd, j, ok), 0.0)
+                    grad += diff
+                    if up:
+                        value += dr.square(diff)               # each pair once
+            value = dr.sum(value) / self.count
+            grad = grad * (2.0 / self.count)
+        if not dr.grad_enabled(x):
+            return value
+        return dr.replace_grad(value, dr.sum(grad * x))
 
 
 def outline_term(masks, K, radius, *, outlines=None):

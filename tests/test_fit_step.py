@@ -51,3 +51,29 @@ def test_density_at_is_the_textures_trilinear_lookup_with_its_gradient():
     Pc = mi.Point3f(*[mi.Float(c[:, a]) for a in range(3)])
     got = np.asarray(density_at(mi.Texture3f(mi.TensorXf(grid)), Pc))
     assert np.allclose(got, [grid[1, 3, 2, 0], grid[1, 3, 2:4, 0].mean()], atol=1e-6)
+
+
+def test_total_variation_and_its_stencil_gradient_against_numpy():
+    from inverse.losses import TotalVariation
+
+    rng = np.random.default_rng(5)
+    for shape in ((4, 5, 6, 1), (1, 6, 7, 3), (2, 1, 3, 3)):
+        x = rng.normal(size=shape).astype(np.float64)
+        pairs = [np.diff(x, axis=a) for a in range(3)]
+        count = sum(d.size for d in pairs)
+        value = sum(np.square(d).sum() for d in pairs) / count
+        grad = np.zeros_like(x)
+        for a, d in enumerate(pairs):                  # d/dx of (x[k+1] - x[k])^2
+            hi = [slice(None)] * 4
+            lo = [slice(None)] * 4
+            hi[a], lo[a] = slice(1, None), slice(None, -1)
+            grad[tuple(hi)] += 2 * d
+            grad[tuple(lo)] -= 2 * d
+        grad /= count
+        tv = TotalVariation(shape)
+        y, g = _grad(x.astype(np.float32).ravel(),
+                     lambda t: tv(mi.TensorXf(t, shape[:3] + (shape[3],))))
+        assert abs(y - value) <= 1e-5 * value
+        assert np.abs(g - grad.ravel()).max() <= 1e-5 * np.abs(grad).max()
+        # Without gradients it is the plain value.
+        assert abs(np.asarray(tv(mi.TensorXf(x.astype(np.float32))))[0] - value) <= 1e-5 * value
