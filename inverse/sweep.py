@@ -23,7 +23,9 @@ Public functions
 ``slice_colours(o, d, colour, totem, frame, res, *, ...) -> SliceColours`` what each
 totem sees at each slice (the sweep's first half);
 ``semi_global(cost, p1, p2) -> cost`` aggregation of a (slices, rows, cols) volume;
-``pull_push(values, weight) -> values`` hole filling of a 2-D map.
+``pull_push(values, weight) -> values`` hole filling of a 2-D map;
+``pixel_lines(o, d, K)`` each ray's pixel as affine in inverse depth;
+``blur_cells(maps, sigma)`` the splats' Gaussian over map cells.
 """
 
 from __future__ import annotations
@@ -32,13 +34,11 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy import ndimage
 
 from inverse.grid import FrustumFrame
-from scenes.camera import project
 
-__all__ = ["SweepResult", "slice_depths", "pull_push", "semi_global", "SliceColours",
-           "slice_colours", "plane_sweep"]
+__all__ = ["SweepResult", "slice_depths", "pixel_lines", "blur_cells", "pull_push",
+           "semi_global", "SliceColours", "slice_colours", "plane_sweep"]
 
 
 @dataclass
@@ -68,46 +68,93 @@ def slice_depths(frame: FrustumFrame, n: int) -> np.ndarray:
     return frame.depth_at((np.arange(n) + 0.5) / n)
 
 
+def pixel_lines(o, d, K):
+    """Each ray's camera pixel on the depth plane ``z`` as ``(au + bu / z, av + bv / z)``.
+
+    A ray ``o + t d`` (camera frame, metres) meets the plane at ``t = (z - o_z) / d_z``;
+    its pixel is affine in ``1 / z``, so the coefficients (m,) are computed once for all
+    planes. Returns ``au, bu, av, bv`` (pixels, pixel metres) and the clamped ``d_z``.
+    """
+    K = np.asarray(K, np.float64)
+    dz = np.where(np.abs(d[:, 2]) > 1e-6, d[:, 2], 1e-6)
+    ax, ay = d[:, 0] / dz, d[:, 1] / dz                   # x / z as z -> infinity
+    bx, by = o[:, 0] - o[:, 2] * ax, o[:, 1] - o[:, 2] * ay
+    au = K[0, 0] * ax + K[0, 1] * ay + K[0, 2]
+    bu = K[0, 0] * bx + K[0, 1] * by
+    av = K[1, 1] * ay + K[1, 2]
+    bv = K[1, 1] * by
+    return au, bu, av, bv, dz
+
+
 def _splat(o, d, colour, totem, frame, z, res, n_tot):
     """Bilinear splats of every ray at every slice: weights (n_tot, nk, nt, ns) and
-    colour sums (n_tot, nk, nt, ns, C)."""
+    colour sums (n_tot, nk, nt, ns, C), float32, C-contiguous."""
     nt, ns = res
     nk = len(z)
     C = colour.shape[1]
-    K = frame.K
-    plane = n_tot * nt * ns
-    wsum = np.zeros((nk, plane), np.float32)
-    csum = np.zeros((nk, C, plane), np.float32)
+    au, bu, av, bv, dz = pixel_lines(o, d, frame.K)
     du = frame.u_range[1] - frame.u_range[0]
     dv = frame.v_range[1] - frame.v_range[0]
-    dz = np.where(np.abs(d[:, 2]) > 1e-6, d[:, 2], 1e-6)
+    # cell-centred coordinates fs = as + bs / z (and ft), per ray
+    a_s = (au - frame.u_range[0]) / du * ns - 0.5
+    b_s = bu / du * ns
+    a_t = (av - frame.v_range[0]) / dv * nt - 0.5
+    b_t = bv / dv * nt
+    plane = n_tot * nt * ns
+    cell0 = totem.astype(np.int64) * (nt * ns)
+    wsum = np.empty((n_tot, nk, nt, ns), np.float32)
+    csum = np.empty((n_tot, nk, nt, ns, C), np.float32)
     for k in range(nk):              # slices, not rays
-        t = (z[k] - o[:, 2]) / dz
-        X = o + t[:, None] * d
-        u, v = project(K, X, z[k]).T
-        fs = (u - frame.u_range[0]) / du * ns - 0.5      # cell-centred coordinates
-        ft = (v - frame.v_range[0]) / dv * nt - 0.5
-        ok = (t > 0) & (fs > -1) & (fs < ns) & (ft > -1) & (ft < nt)
-        fs, ft, tk, ck = fs[ok], ft[ok], totem[ok], colour[ok]
+        fs = a_s + b_s / z[k]
+        ft = a_t + b_t / z[k]
+        ok = ((z[k] - o[:, 2]) / dz > 0) & (fs > -1) & (fs < ns) & (ft > -1) & (ft < nt)
+        fs, ft, ck = fs[ok], ft[ok], colour[ok]
         i0, j0 = np.floor(fs).astype(np.int64), np.floor(ft).astype(np.int64)
         a, b = fs - i0, ft - j0
-        idx, wts, sel = [], [], []
+        idx, wts = [], []
         for di, dj, wgt in ((0, 0, (1 - a) * (1 - b)), (1, 0, a * (1 - b)),
                             (0, 1, (1 - a) * b), (1, 1, a * b)):
             ii, jj = i0 + di, j0 + dj
             keep = (ii >= 0) & (ii < ns) & (jj >= 0) & (jj < nt)
-            idx.append(((tk * nt + jj) * ns + ii)[keep])
-            wts.append(wgt[keep])
-            sel.append(np.nonzero(keep)[0])
-        idx = np.concatenate(idx)
-        wts = np.concatenate(wts)
-        cols = ck[np.concatenate(sel)]
-        wsum[k] = np.bincount(idx, wts, plane)
+            idx.append(np.where(keep, cell0[ok] + jj * ns + ii, plane))  # outside: spare
+            wts.append(wgt)
+        idx, wts = np.concatenate(idx), np.concatenate(wts)
+        cols = np.tile(ck, (4, 1))
+        wsum[:, k] = np.bincount(idx, wts, plane + 1)[:plane].reshape(n_tot, nt, ns)
         for c in range(C):
-            csum[k, c] = np.bincount(idx, wts * cols[:, c], plane)
-    wsum = np.moveaxis(wsum.reshape(nk, n_tot, nt, ns), 1, 0)
-    csum = np.moveaxis(csum.reshape(nk, C, n_tot, nt, ns), (1, 2), (4, 0))
+            csum[:, k, ..., c] = np.bincount(idx, wts * cols[:, c],
+                                             plane + 1)[:plane].reshape(n_tot, nt, ns)
     return wsum, csum
+
+
+def blur_cells(maps: np.ndarray, sigma: float, *, channels: bool = False,
+               truncate: float = 2.5) -> np.ndarray:
+    """Gaussian of ``sigma`` cells over the map axes of ``maps``: (..., nt, ns), or
+    (..., nt, ns, C) with ``channels``; zero outside the map (``scipy.ndimage``'s
+    ``gaussian_filter`` with ``mode="constant"``, to float32 rounding); float32 out.
+    OpenCV filters map by map, three times faster than ndimage over the volume."""
+    import cv2
+
+    r = int(truncate * sigma + 0.5)
+    x = np.arange(-r, r + 1)
+    kernel = np.exp(-0.5 * x ** 2 / sigma ** 2)
+    kernel = (kernel / kernel.sum()).astype(np.float32)
+    maps = np.ascontiguousarray(maps, np.float32)
+    lead = maps.shape[:-3] if channels else maps.shape[:-2]
+    flat = maps.reshape((-1,) + maps.shape[len(lead):])
+    out = np.empty_like(flat)
+    for i in range(len(flat)):
+        cv2.sepFilter2D(flat[i], -1, kernel, kernel, dst=out[i],
+                        borderType=cv2.BORDER_CONSTANT)
+    return out.reshape(maps.shape)
+
+
+def _box3(img: np.ndarray) -> np.ndarray:
+    """Mean over each pixel's 3 x 3 neighbours, the edge repeated (as ndimage's
+    ``uniform_filter(size=(3, 3, 1), mode="nearest")``), (H, W, C) float64."""
+    p = np.pad(img, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    rows = p[:-2] + p[1:-1] + p[2:]
+    return (rows[:, :-2] + rows[:, 1:-1] + rows[:, 2:]) / 9.0
 
 
 def pull_push(values: np.ndarray, weight: np.ndarray, *, levels: int = 8) -> np.ndarray:
@@ -127,15 +174,15 @@ def pull_push(values: np.ndarray, weight: np.ndarray, *, levels: int = 8) -> np.
         pad = ((0, 2 * H2 - ww.shape[0]), (0, 2 * W2 - ww.shape[1]))
         wp = np.pad(ww, pad)
         vp = np.pad(vw, pad + ((0, 0),))
-        w2 = wp.reshape(H2, 2, W2, 2).sum((1, 3))
-        v2 = vp.reshape(H2, 2, W2, 2, -1).sum((1, 3))
+        w2 = wp[0::2, 0::2] + wp[1::2, 0::2] + wp[0::2, 1::2] + wp[1::2, 1::2]
+        v2 = vp[0::2, 0::2] + vp[1::2, 0::2] + vp[0::2, 1::2] + vp[1::2, 1::2]
         s = np.minimum(w2, 1.0) / np.maximum(w2, 1e-12)      # clamp the confidence at 1
         pyr.append((v2 * s[..., None], w2 * s))
     vw, ww = pyr[-1]
     est = vw / np.maximum(ww, 1e-12)[..., None]
     for vw, ww in reversed(pyr[:-1]):
         up = np.repeat(np.repeat(est, 2, 0), 2, 1)[:ww.shape[0], :ww.shape[1]]
-        up = ndimage.uniform_filter(up, size=(3, 3, 1), mode="nearest")
+        up = _box3(up)
         a = np.minimum(ww, 1.0)[..., None]
         est = a * vw / np.maximum(ww, 1e-12)[..., None] + (1 - a) * up
     return est
@@ -227,11 +274,8 @@ def slice_colours(o, d, colour, totem, frame: FrustumFrame, res, *, n_slices: in
         rho = max(float(np.median(per_cell[per_cell > 0])) if np.any(per_cell > 0)
                   else 1e-3, 1e-3)
         sigma = float(np.clip(np.sqrt(4.0 / (np.pi * rho)), 0.5, 4.0))
-    ax = (0, 0, sigma, sigma)
-    wsum = ndimage.gaussian_filter(wsum, ax, mode="constant",
-                                   truncate=2.5)
-    csum = ndimage.gaussian_filter(csum, ax + (0,), mode="constant",
-                                   truncate=2.5)
+    wsum = blur_cells(wsum, sigma)
+    csum = blur_cells(csum, sigma, channels=True)
     peak = 1.0 / (2 * np.pi * sigma ** 2)
     land = wsum > min_weight * peak
     mu = csum / np.maximum(wsum, 1e-12)[..., None]

@@ -23,12 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scipy import ndimage
-
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.integrator import DELTA_SCALE
 from inverse.rays import TotemRays
-from inverse.splat import error_map, holdout_errors, splat_image
+from inverse.splat import blur, error_map, holdout_errors, splat_image
 from inverse.sweep import plane_sweep, slice_colours
 from scenes import backend
 from scenes.camera import pixel_rays, project
@@ -112,7 +110,7 @@ def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
     err_s, n_s = error_map(*stereo_errors[:3], size, sigma=sigma)
     known = (n_g > min_rays) & (n_s > min_rays)
     weight = np.where(known, err_s < margin * err_g, prefer_stereo).astype(np.float64)
-    return np.clip(ndimage.gaussian_filter(weight, sigma / 2), 0.0, 1.0)
+    return np.clip(blur(weight, sigma / 2), 0.0, 1.0)
 
 
 def choose_view(rays: TotemRays, frame: FrustumFrame, grid_depth, grid_view, grid_points,

@@ -81,7 +81,9 @@ def _decode(path, what: str, mode: str) -> np.ndarray:
 
 
 def write_image(path, image: np.ndarray) -> None:
-    """Write float [0, 1] (H, W, 3) sRGB, or bool/uint8 (H, W), as PNG, atomically."""
+    """Write float [0, 1] (H, W, 3) sRGB, or bool/uint8 (H, W), as PNG, atomically;
+    zlib's fastest level (a check writes some twenty pictures: four times faster than the
+    default, files a sixth larger)."""
     from PIL import Image
 
     arr = np.asarray(image)
@@ -90,7 +92,7 @@ def write_image(path, image: np.ndarray) -> None:
     elif arr.dtype != np.uint8:
         arr = (np.clip(np.nan_to_num(arr), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     buf = io.BytesIO()
-    Image.fromarray(arr).save(buf, format="PNG")
+    Image.fromarray(arr).save(buf, format="PNG", compress_level=1)
     write_bytes(path, buf.getvalue())
 
 

@@ -179,3 +179,31 @@ def test_splat_interpolates_linearly_between_rays_and_reads_pixels_alike():
     assert np.all(np.isfinite(img))
     pick = (np.array([0, 5, W - 1, 100]), np.array([0, H - 1, 3, 50]))
     assert np.allclose(splat_image(u, v, values, (W, H), at=pick), img[pick[1], pick[0]])
+
+
+def test_linear_interpolation_is_exact_for_a_plane_and_covers_the_hull():
+    """Any triangle holding a pixel reproduces a linear function exactly, so a query
+    placed in the wrong triangle would show; the hull must be scipy's (qhull's)."""
+    from scipy.spatial import Delaunay
+
+    from inverse.splat import linear_at
+
+    rng = np.random.default_rng(7)
+    flat = np.unique(rng.integers(0, W * H, 2500))
+    px = np.stack([flat % W, flat // W], 1)
+    plane = (0.25 + 0.01 * px[:, 0] - 0.02 * px[:, 1])[:, None]
+    vq, uq = np.divmod(np.arange(W * H), W)
+    got = linear_at(px, plane, uq, vq, (W, H))[:, 0]
+    inside = Delaunay(px.astype(float)).find_simplex(np.stack([uq, vq], 1).astype(float)) >= 0
+    assert np.array_equal(np.isfinite(got), inside)
+    assert np.allclose(got[inside], 0.25 + 0.01 * uq[inside] - 0.02 * vq[inside], atol=1e-9)
+
+
+def test_blur_is_ndimages_gaussian_on_a_map():
+    from scipy import ndimage
+
+    from inverse.splat import blur
+
+    img = np.random.default_rng(2).uniform(0, 1, (H, W))
+    for sigma in (8.0, 16.0):
+        assert np.allclose(blur(img, sigma), ndimage.gaussian_filter(img, sigma), atol=1e-12)

@@ -83,3 +83,37 @@ def test_the_shared_consistency_is_the_landing_totems_mean_and_variance():
             assert np.allclose(mean[k, i, j], c.mean(0), atol=1e-6)
             assert np.isclose(var[k, i, j], ((c - c.mean(0)) ** 2).sum(1).mean(),
                               atol=1e-6)
+
+
+def test_blur_cells_is_ndimages_gaussian_with_zero_outside():
+    from scipy import ndimage
+
+    from inverse.sweep import blur_cells
+
+    rng = np.random.default_rng(3)
+    maps = rng.uniform(0, 1, (2, 5, 12, 17)).astype(np.float32)
+    for sigma in (0.7, 1.9):
+        want = ndimage.gaussian_filter(maps, (0, 0, sigma, sigma), mode="constant",
+                                       truncate=2.5)
+        assert np.allclose(blur_cells(maps, sigma), want, atol=1e-6)
+        colour = np.repeat(maps[..., None], 3, -1) * np.array([1.0, 0.5, 2.0], np.float32)
+        want_c = ndimage.gaussian_filter(colour, (0, 0, sigma, sigma, 0), mode="constant",
+                                         truncate=2.5)
+        assert np.allclose(blur_cells(colour, sigma, channels=True), want_c, atol=1e-6)
+
+
+def test_a_rays_pixel_on_a_depth_plane_is_affine_in_inverse_depth():
+    from scenes.camera import project
+
+    from inverse.sweep import pixel_lines
+
+    rng = np.random.default_rng(4)
+    K = np.array([[500.0, 0.3, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
+    o = rng.normal(0, 0.2, (50, 3)) + [0, 0, 1.5]
+    d = rng.normal(0, 0.3, (50, 3)) + [0, 0, 1.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    au, bu, av, bv, _ = pixel_lines(o, d, K)
+    for z in (2.0, 7.5):
+        t = (z - o[:, 2]) / d[:, 2]
+        uv = project(K, o + t[:, None] * d)
+        assert np.allclose(au + bu / z, uv[:, 0]) and np.allclose(av + bv / z, uv[:, 1])
