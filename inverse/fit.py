@@ -45,9 +45,9 @@ from inverse import view
 from inverse.batches import DeviceRays, photo_terms, ray_batches
 from inverse.fit_files import FitResult, fit_timings, scene_fingerprint
 from inverse.grid import FrustumFrame, frame_for_scene, resample, stage_res, stage_samples
-from inverse.losses import TotalVariation, outline_term, support_term
+from inverse.losses import TotalVariation, outline_term
 from inverse.rays import TotemPixels, TotemRays, exit_rays, refracted_rays, totem_pixels
-from inverse.support import plane_from_centres
+from inverse.support import plane_from_centres, plane_view
 from scenes import backend, folder
 from scenes.colour import linear_to_srgb, srgb_to_linear
 from scenes.errors import BadInput
@@ -96,7 +96,7 @@ class FitSettings:
     stereo_p2: float = 8.0
     stereo_margin: float = 0.9       # stereo must beat the grid's hold-out by 10 %
     stereo_far_biases: tuple = (0.0, 1.0)
-    support: float = 0.0             # weight of the support-plane prior (0: off)
+    resting: bool = False            # the totems rest on one plane: it caps the view
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -165,11 +165,11 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
         refl = np.where(itg.mirrored_numpy(pixels.d_cam, pixels.totem)[1], 0.0, refl)
 
     learn_pose = not fixed_pose
-    plane = plane_from_centres(initial, radius) if settings.support > 0 else None
+    plane = plane_from_centres(initial, radius) if settings.resting else None
     model = _optimise(itg, frame, pixels, refl, initial, radius, ior, settings,
                       outline=(_outline(scene, K, radius, initial, settings)
                                if learn_pose and settings.outline > 0 else None),
-                      learn_pose=learn_pose, progress=progress, plane=plane)
+                      learn_pose=learn_pose, progress=progress)
     centers, pose_accepted = _pose_check(itg, frame, model, pixels, refl, initial,
                                          radius, ior, learn_pose, model.history)
 
@@ -192,6 +192,9 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                     "holdout_L1": {k: round(float(e), 5) for k, e in chosen.holdout.items()}}
         recon, depth, totem_points = chosen.recon, chosen.depth, chosen.points
     geometry["support"] = None if plane is None else plane.to_dict()
+    if plane is not None:
+        recon, depth, totem_points, geometry["support"]["share"] = plane_view(
+            rays, frame, plane, recon, depth, totem_points, scene.size)
     t_stereo = time.perf_counter() - t0
 
     timings = fit_timings(model.step_times, settings, t_pose=t_pose, t_render=t_render,
@@ -285,10 +288,10 @@ def _usable_pixels(itg, frame, pixels: TotemPixels, initial, radius, ior, settin
 
 
 def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, settings, *,
-              outline, learn_pose: bool, progress: bool, plane=None) -> _Model:
+              outline, learn_pose: bool, progress: bool) -> _Model:
     """Adam over the stages: grids (and from ``pose_start`` on the centres) and the
-    ambient colour, on photometric + TV + distortion (+ outline, + ``plane``'s prior)
-    losses, each step on a batch of ``settings.batch_rays`` totem rays."""
+    ambient colour, on photometric + TV + distortion (+ outline) losses, each step on a
+    batch of ``settings.batch_rays`` totem rays (:func:`ray_batches`)."""
     mi = backend.modules()[1]
     rays = DeviceRays.upload(pixels, refl)
     batches = ray_batches(len(pixels.u), settings.batch_rays, settings.seed)
@@ -296,7 +299,7 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
     total_steps = sum(s for _, s in stages)
     pose_step = int(round(settings.pose_start * total_steps))
     history = {"loss": [], "photo": [], "tv": [], "distortion": [], "pose": [],
-               "support": [], "stage": []}
+               "stage": []}
     if learn_pose:
         history["centers"] = []      # (n, 3) per step, metres: the pose's path
     step_times, step = [], 0
@@ -323,8 +326,6 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
         opt.set_learning_rate({"ambient": settings.lr_ambient})
         params.update(opt)
         tv_d, tv_c = TotalVariation(density.shape), TotalVariation(colour.shape)
-        support = plane and support_term(frame, plane, density.shape,
-                                         free=settings.density_init)
         pose_on = False
         last = k == len(stages) - 1
         for i in range(n_steps):
@@ -341,15 +342,13 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
             tv = settings.tv_density * tv_d(params["density"]) + \
                 settings.tv_colour * tv_c(params["colour"])
             loss = photo + tv + settings.distortion * dist
-            sup_l = mi.Float(0.0) if support is None else support(params["density"])
-            loss = loss if support is None else loss + settings.support * sup_l
             pose_l = mi.Float(0.0)
             if pose_on and outline is not None:
                 pose_l = outline(params["centers"])
                 loss = loss + settings.outline * pose_l
             _backend_step(loss, opt, params)
             for k, x in (("loss", loss), ("photo", photo), ("tv", tv),
-                         ("distortion", dist), ("pose", pose_l), ("support", sup_l)):
+                         ("distortion", dist), ("pose", pose_l)):
                 history[k].append(float(x[0]))
             history["stage"].append(frac)
             if learn_pose:

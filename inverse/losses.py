@@ -9,7 +9,7 @@ import numpy as np
 from inverse.outline import outline_loss, outline_targets, outline_weights
 from scenes import backend
 
-__all__ = ["TotalVariation", "outline_term", "support_cells", "support_term"]
+__all__ = ["TotalVariation", "outline_term"]
 
 
 class TotalVariation:
@@ -81,61 +81,3 @@ def outline_term(masks, K, radius, *, outlines=None):
 
     return term
 
-
-def support_cells(frame, plane, shape) -> tuple[np.ndarray, np.ndarray]:
-    """The density cells ``(nr, nt, ns)`` the support plane crosses along each camera
-    column (the column's ray meets ``N . X = h`` in front of the camera within the grid's
-    depth range), one per such column, and the cells in front of them on those columns
-    (between the camera and the plane): two arrays of flat indices.
-
-    ``frame`` a :class:`inverse.grid.FrustumFrame`; ``plane`` an
-    :class:`inverse.support.SupportPlane` (camera frame, metres).
-    """
-    nr, nt, ns = shape[:3]
-    s = (np.arange(ns) + 0.5) / ns
-    t = (np.arange(nt) + 0.5) / nt
-    S, T = np.meshgrid(s, t)                                     # (nt, ns)
-    u = frame.u_range[0] + S * (frame.u_range[1] - frame.u_range[0])
-    v = frame.v_range[0] + T * (frame.v_range[1] - frame.v_range[0])
-    K = frame.K
-    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
-    den = d @ plane.normal                                        # z = h / (N . d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(den < 0, plane.offset / den, np.inf)
-    ok = np.isfinite(z) & (z > frame.near) & (z < frame.far)
-    r = (1.0 / frame.near - 1.0 / np.where(ok, z, frame.near)) \
-        / (1.0 / frame.near - 1.0 / frame.far)
-    k = np.clip((r * nr).astype(np.int64), 0, nr - 1)
-    jt, js = np.nonzero(ok)
-    on = (k[jt, js] * nt + jt) * ns + js
-    kk = np.arange(nr)[:, None]
-    front = kk < k[jt, js][None, :]                               # (nr, columns)
-    before = ((kk * nt + jt[None, :]) * ns + js[None, :])[front]
-    return on.astype(np.int64), before.astype(np.int64)
-
-
-def support_term(frame, plane, shape, *, free: float, tau: float = 3.0):
-    """The support-plane prior: a function of the raw density tensor (``mi.TensorXf``,
-    ``shape``) giving the mean squared shortfall of the cells the plane crosses
-    (:func:`support_cells`) below the raw density that makes one cell's optical depth
-    along its column ``tau`` (``softplus(x) * DELTA_SCALE / nr = tau``), plus the mean
-    squared excess of the cells in front of it above ``free`` (raw density): a surface
-    there, seen through empty space, which the photometric term may still move where the
-    totems disagree (an object on the table, a table's edge)."""
-    from inverse.integrator import DELTA_SCALE
-
-    dr, mi = backend.modules()
-    nr = shape[0]
-    target = float(np.log(np.expm1(tau * nr / DELTA_SCALE)))     # inverse softplus
-    on, before = support_cells(frame, plane, shape)
-    on_dr = backend.upload(mi.UInt32, on, np.uint32)
-    before_dr = backend.upload(mi.UInt32, before, np.uint32)
-    n_on, n_before = float(max(1, len(on))), float(max(1, len(before)))
-
-    def term(tensor):
-        x = dr.gather(mi.Float, tensor.array, on_dr)
-        y = dr.gather(mi.Float, tensor.array, before_dr)
-        return dr.sum(dr.square(dr.maximum(target - x, 0.0))) / n_on \
-            + dr.sum(dr.square(dr.maximum(y - free, 0.0))) / n_before
-
-    return term

@@ -14,8 +14,12 @@ tuned constant. The camera must see the plane from the totems' side (``h < 0``: 
 camera centre lies above it), and a camera held upright sees a table's normal pointing
 up the image (``N_y < 0``), which chooses between the two solutions of three totems.
 
-Whether the totems rest there is then up to the photo (:mod:`inverse.fit`): the plane
-is only a hypothesis until the totems' rays agree on it.
+:func:`plane_view` uses the plane for the camera view: the totems' rays are splatted
+where they first meet either the fit's chosen surface or the plane, so a table seen at
+grazing angles is placed where it is, not at the depth that explains each ray alone.
+Three floating totems also fix such a plane, so the fit uses it only when told the
+totems rest (``FitSettings.support_view``; see docs/decisions.md, "fit: the support
+plane").
 """
 
 from __future__ import annotations
@@ -24,13 +28,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SupportPlane", "plane_from_centres", "ray_plane", "MAX_RESIDUAL"]
+__all__ = ["SupportPlane", "plane_from_centres", "ray_plane", "plane_view", "MAX_RESIDUAL",
+           "COS_VIEW"]
 
 MAX_RESIDUAL = 0.05
 """Largest rms residual ``N . P_j - R_j - h`` (in units of the mean radius) for four or
 more totems to be taken as resting on one plane: a twentieth of a radius (3-5 mm),
 above the initial pose's error along the normal (about a millimetre) and below what
 floating totems placed near one height by chance reach (the box seed 1: 0.095)."""
+
+COS_VIEW = 0.3
+"""Rays entering their sphere at an incidence cosine below this are left out of the
+plane's view: near the rim the glass blurs and mixes in reflection (as
+:mod:`verify.evidence`)."""
 
 
 @dataclass(frozen=True)
@@ -140,3 +150,73 @@ def plane_from_centres(centers, radius, *, max_residual: float = MAX_RESIDUAL):
     if best is None or best.residual > max_residual * float(R.mean()):
         return None
     return best
+
+
+def plane_view(rays, frame, plane: SupportPlane, recon, depth, points, size, *,
+               res=(120, 160), cos_min: float = COS_VIEW):
+    """The camera view with its depth capped by the support plane.
+
+    Where a camera column meets the plane before the chosen surface (``depth``), the
+    view is the totem rays (``cos_in >= cos_min``) splatted where they first pass behind
+    the capped depth map (:func:`inverse.splat.surface_hits`, a map of ``res`` cells);
+    elsewhere ``recon`` is kept.
+
+    Parameters
+    ----------
+    rays : :class:`inverse.rays.TotemRays` (camera frame, metres; linear radiance).
+    frame : the grid's :class:`inverse.grid.FrustumFrame`.
+    recon, depth : (H, W, 3) sRGB and (H, W) metres, the chosen view and its depth.
+    points : (k, 3) camera-frame metres, where the rays end in the chosen geometry.
+    size : (W, H).
+
+    Returns
+    -------
+    recon (H, W, 3) float32 sRGB, depth (H, W) float32 metres, points (k', 3) metres,
+    and the share of the image whose depth the plane capped.
+    """
+    from inverse.grid import cells_to_pixels
+    from inverse.splat import splat_image, surface_hits
+    from scenes.camera import pixel_rays, project
+    from scenes.colour import linear_to_srgb
+
+    W, H = size
+    K = frame.K
+    nt, ns = res
+    S, T = np.meshgrid((np.arange(ns) + 0.5) / ns, (np.arange(nt) + 0.5) / nt)
+    u = frame.u_range[0] + S * (frame.u_range[1] - frame.u_range[0])
+    v = frame.v_range[0] + T * (frame.v_range[1] - frame.v_range[0])
+    d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    z_plane = ray_plane(np.zeros(3), d_cam.reshape(-1, 3), plane.normal,
+                        plane.offset).reshape(nt, ns)          # d_cam has z = 1: t = z
+    chosen = np.asarray(depth, np.float64)[np.clip(np.rint(v).astype(int), 0, H - 1),
+                                           np.clip(np.rint(u).astype(int), 0, W - 1)]
+    chosen = np.where(np.isfinite(chosen) & (chosen > 0), chosen, frame.far)
+    capped = np.clip(np.minimum(chosen, z_plane), frame.near, frame.far)
+    good = rays.cos_in >= cos_min
+    uh, vh, zh, hit = surface_hits(rays.o[good], rays.d[good], frame, capped)
+    view = linear_to_srgb(np.clip(splat_image(uh, vh, rays.radiance[good], size, hit=hit),
+                                  0.0, 1.0))
+    on = cells_to_pixels((z_plane < chosen).astype(np.float64), frame, size,
+                         nearest=True) > 0.5
+    out = np.where(on[..., None], view, recon).astype(np.float32)
+    new_depth = np.where(on, cells_to_pixels(capped, frame, size, nearest=True), depth)
+    inside = hit & (uh >= -0.5) & (uh < W - 0.5) & (vh >= -0.5) & (vh < H - 0.5)
+    X = pixel_rays(K, uh[inside], vh[inside])
+    X = X / X[:, 2:3] * zh[inside, None]
+
+    def landing(P):                                     # whether P projects into ``on``
+        P = np.asarray(P, np.float64).reshape(-1, 3)
+        uv = np.full((len(P), 2), -1.0)
+        front = P[:, 2] > 0
+        uv[front] = project(K, P[front])
+        ui, vi = np.rint(uv[:, 0]).astype(int), np.rint(uv[:, 1]).astype(int)
+        ok = front & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+        res_ = np.zeros(len(P), bool)
+        res_[ok] = on[vi[ok], ui[ok]]
+        return res_, ok
+
+    in_new, _ = landing(X)
+    old = np.asarray(points, np.float64).reshape(-1, 3)
+    in_old, ok_old = landing(old)
+    pts = np.concatenate([X[in_new], old[ok_old & ~in_old]])
+    return out, new_depth.astype(np.float32), pts, float(on.mean())

@@ -1,11 +1,9 @@
-"""The support plane from resting totems (inverse/support.py) and its prior's cells
-(inverse/losses.support_cells), against planes and spheres built by hand."""
+"""The support plane from resting totems (inverse/support.py), against planes and spheres
+built by hand, and the camera view it caps."""
 
 import numpy as np
 import pytest
 
-from inverse.grid import frame_for_scene
-from inverse.losses import support_cells
 from inverse.support import plane_from_centres, ray_plane
 
 
@@ -70,24 +68,61 @@ def test_ray_plane_distance():
     assert np.isinf(t[1])                           # looks up, away from it
 
 
-def test_support_cells_hold_the_plane_crossing():
-    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+
+def test_the_plane_caps_a_view_that_put_the_table_at_infinity():
+    """Rays from three totems' positions land on a striped table (y = 0.3 m below the
+    camera); a fit that put everything at the far plane is mended where the camera sees
+    the table, the rows above the horizon keep the fit's view, and the new points lie on
+    the table."""
+    from inverse.grid import frame_for_scene
+    from inverse.rays import TotemRays
+    from inverse.support import plane_view
+    from scenes.camera import pixel_rays
+    from scenes.colour import srgb_to_linear
+
+    W, H = 160, 120
+    K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
     R = np.full(3, 0.07)
-    C = _resting(N_TABLE, -0.45, R, [(-0.2, 0.5), (0.05, 0.7), (0.25, 0.6)])
+    C = np.array([[-0.2, 0.23, 1.0], [0.0, 0.23, 1.2], [0.2, 0.23, 1.1]])
     plane = plane_from_centres(C, R)
-    frame = frame_for_scene(K, (320, 240), C, R)
-    shape = (48, 30, 40)
-    idx, before = support_cells(frame, plane, shape)
-    assert len(before) > 0
-    k, rest = np.divmod(idx, shape[1] * shape[2])
-    jt, js = np.divmod(rest, shape[2])
-    # one cell per column, only in columns that look down at the table
-    assert len(np.unique(rest)) == len(idx) > 0.3 * shape[1] * shape[2]
-    # the cell's depth range holds the plane's depth on the column's centre ray
-    g_lo = np.stack([(js + 0.5) / shape[2], (jt + 0.5) / shape[1], k / shape[0]], 1)
-    g_hi = g_lo.copy()
-    g_hi[:, 2] = (k + 1) / shape[0]
-    X_lo, X_hi = frame.from_unit(g_lo), frame.from_unit(g_hi)
-    below_lo = X_lo @ plane.normal - plane.offset
-    below_hi = X_hi @ plane.normal - plane.offset
-    assert np.all(below_lo * below_hi <= 1e-12)     # the plane lies between the two ends
+    assert plane is not None and plane.offset == pytest.approx(-0.3)
+
+    def stripes(X):                                 # sRGB on the table, 10 cm stripes
+        g = 0.2 + 0.6 * (np.floor(X[:, 2] / 0.1) % 2)
+        return np.stack([g, 0.5 * g, 0.3 + 0 * g], 1)
+
+    rng = np.random.default_rng(0)
+    o, d, rad, tot = [], [], [], []
+    for j, P in enumerate(C):                       # each totem's rays fan out over the table
+        target = np.stack([rng.uniform(-0.8, 0.8, 4000), np.full(4000, 0.3),
+                           rng.uniform(0.6, 3.0, 4000)], 1)
+        dj = target - P
+        dj /= np.linalg.norm(dj, axis=1, keepdims=True)
+        o.append(np.repeat(P[None], 4000, 0))
+        d.append(dj)
+        rad.append(srgb_to_linear(stripes(target)))
+        tot.append(np.full(4000, j))
+    rays = TotemRays(np.concatenate(o), np.concatenate(d), np.concatenate(rad),
+                     np.concatenate(tot), np.ones(12000))
+    frame = frame_for_scene(K, (W, H), C, R)
+    grey = np.full((H, W, 3), 0.5, np.float32)
+    far = np.full((H, W), frame.far, np.float32)
+    recon, depth, points, share = plane_view(rays, frame, plane, grey, far,
+                                             np.zeros((0, 3)), (W, H))
+    uu, vv = np.meshgrid(np.arange(W), np.arange(H))
+    dc = pixel_rays(K, uu.ravel().astype(float), vv.ravel().astype(float))
+    t = ray_plane(np.zeros(3), dc, plane.normal, plane.offset)
+    X = t[:, None] * dc
+    on_table = (np.isfinite(t) & (X[:, 2] > 0.8) & (X[:, 2] < 2.5)
+                & (np.abs(X[:, 0]) < 0.6)).reshape(H, W)
+    truth = stripes(np.where(np.isfinite(X), X, 0)).reshape(H, W, 3)
+    err_new = np.abs(recon - truth).mean(2)[on_table].mean()
+    err_old = np.abs(grey - truth).mean(2)[on_table].mean()
+    assert on_table.sum() > 1000
+    assert err_new < 0.5 * err_old
+    assert np.all(recon[0] == grey[0])              # above the horizon: the fit's view
+    np.testing.assert_allclose(depth[on_table], X[on_table.ravel(), 2], rtol=0.05)
+    assert len(points) > 1000
+    off = np.abs(points @ plane.normal - plane.offset)  # metres off the table
+    assert np.percentile(off, 95) < 0.01
+    assert 0.2 < share < 0.9
