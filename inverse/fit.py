@@ -66,7 +66,7 @@ class FitSettings:
 
     density_res: tuple = (48, 60, 80)
     colour_res: tuple = (1, 120, 160)
-    stages: tuple = ((0.5, 200), (1.0, 200))
+    stages: tuple = ((0.5, 125), (1.0, 125))
     n_samples: int = 64
     lr_density: float = 0.3
     lr_colour: float = 0.02
