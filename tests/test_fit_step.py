@@ -77,3 +77,56 @@ def test_total_variation_and_its_stencil_gradient_against_numpy():
         assert np.abs(g - grad.ravel()).max() <= 1e-5 * np.abs(grad).max()
         # Without gradients it is the plain value.
         assert abs(np.asarray(tv(mi.TensorXf(x.astype(np.float32))))[0] - value) <= 1e-5 * value
+
+
+def test_a_step_gives_the_loss_and_gradients_of_the_texture_lookup(monkeypatch):
+    """The whole photometric + distortion + TV loss of a batch of totem rays, and its
+    gradients in the grids and the centres, with the density read by ``density_at`` and
+    by ``mi.Texture3f.eval`` (the plain step): equal to float rounding."""
+    from inverse import integrator
+    from inverse.batches import DeviceRays, photo_terms
+    from inverse.grid import frame_for_scene
+    from inverse.losses import TotalVariation
+    from inverse.rays import TotemPixels
+    from scenes import camera
+
+    W, H = 80, 60
+    K = camera.intrinsics(W, H, 60.0)
+    centers = np.array([[-0.25, 0.1, 1.4], [0.25, 0.12, 1.5]])
+    radius, ior = np.array([0.1, 0.1]), np.array([1.52, 1.52])
+    rng = np.random.default_rng(2)
+    frame = frame_for_scene(K, (W, H), centers, radius)
+    density = rng.normal(-1.0, 1.5, (6, 8, 10, 1)).astype(np.float32)
+    colour = rng.random((1, 8, 10, 3)).astype(np.float32)
+    vv, uu = np.mgrid[0:H, 0:W]
+    d = camera.pixel_rays(K, uu.ravel(), vv.ravel())
+    j = np.argmin([np.linalg.norm(np.cross(d, P / np.linalg.norm(P)), axis=1)
+                   for P in centers], axis=0)
+    hit = np.linalg.norm(np.cross(d, centers[j] / np.linalg.norm(centers[j], axis=1)[:, None]),
+                         axis=1) < 0.6 * radius[j] / np.linalg.norm(centers[j], axis=1)
+    pixels = TotemPixels(u=uu.ravel()[hit], v=vv.ravel()[hit], d_cam=d[hit], totem=j[hit],
+                         observed=rng.random((hit.sum(), 3)).astype(np.float32))
+    rays = DeviceRays.upload(pixels, np.full(hit.sum(), 0.04))
+    ambient = mi.Float([0.1, 0.2, 0.3])
+
+    def loss_and_grads():
+        itg = integrator.integrator_class()(mi.Properties())
+        itg.setup(frame, density, colour, centers, radius, ior)
+        itg.n_samples = 32
+        params = mi.traverse(itg)
+        for k in ("density", "colour", "centers"):
+            dr.enable_grad(params[k])
+        params.update()
+        photo, dist = photo_terms(itg, rays, ambient)
+        loss = photo + 1e-2 * dist + 0.01 * TotalVariation(density.shape)(params["density"])
+        dr.backward(loss)
+        return [np.asarray(loss)[0]] + [np.asarray(dr.grad(params[k])).ravel()
+                                         for k in ("density", "colour", "centers")]
+
+    ours = loss_and_grads()
+    monkeypatch.setattr(integrator, "density_at", lambda tex, p: tex.eval(p)[0])
+    plain = loss_and_grads()
+    assert ours[0] > 0 and abs(ours[0] - plain[0]) <= 1e-6 * plain[0]
+    for a, b in zip(ours[1:], plain[1:]):
+        assert np.abs(b).max() > 0
+        assert np.abs(a - b).max() <= 1e-4 * np.abs(b).max()
