@@ -164,7 +164,7 @@ def density_at(density: mi.Texture3f, p) -> mi.Float:
     Eight gathers from the texture's tensor whose adjoint is a plain atomic add
     (``dr.ReduceMode.Direct``): the texture's own adjoint, an expanded scatter, took
     twice as long on the backward pass's one thread (docs/decisions.md, "fit: the
-    step's kernels halved").
+    optimisation in about half the time").
     """
     dr, mi = backend.modules()
     t = density.tensor()
@@ -184,7 +184,8 @@ def density_at(density: mi.Texture3f, p) -> mi.Float:
 
     planes = []
     for iz in (i0[2], i1[2]):
-        rows = [dr.lerp(at(i0[0], iy, iz), at(i1[0], iy, iz), w[0]) for iy in (i0[1], i1[1])]
+        rows = [dr.lerp(at(i0[0], iy, iz), at(i1[0], iy, iz), w[0])
+                for iy in (i0[1], i1[1])]
         planes.append(dr.lerp(rows[0], rows[1], w[1]))
     return dr.lerp(planes[0], planes[1], w[2])
 

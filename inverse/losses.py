@@ -19,7 +19,7 @@ class TotalVariation:
     Its gradient, ``2 / count * sum_j (x_i - x_j)`` over each cell's (up to) six
     neighbours, is computed directly by gathers and attached with ``dr.replace_grad``:
     differentiating the pairs' gathers made scatter-adds over every pair, a ninth of a
-    fit's step (docs/decisions.md, "fit: the step's kernels halved").
+    fit's step (docs/decisions.md, "fit: the optimisation in about half the time").
     """
 
     def __init__(self, shape):
@@ -37,7 +37,7 @@ class TotalVariation:
             i = dr.arange(mi.UInt32, D * Hh * Ww * C)
             value, grad = mi.Float(0.0), mi.Float(0.0)
             for stride, n in ((C, Ww), (C * Ww, Hh), (C * Ww * Hh, D)):
-                pos = (i // stride) % n                        # the cell's index on the axis
+                pos = (i // stride) % n                # the cell's index on the axis
                 for up in (True, False):
                     ok = pos < n - 1 if up else pos > 0
                     j = dr.select(ok, i + stride if up else i - stride, i)
