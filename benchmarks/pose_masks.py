@@ -7,8 +7,8 @@ default), against the truth.
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
 ``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
-distance, median and worst, for the mask's own pose, the photo's rim and the two weighed,
-and how often the weighed pose's reported uncertainty covers its true error (the true
+distance, median and worst, for the mask's own pose, the photo's rim and the two weighed
+(each photo's totems pooled, as ``totems fit`` does), and how often the weighed pose's reported uncertainty covers its true error (the true
 centre inside the 95 % ellipsoid of its sd along the line of sight and across it).
 ``--jpeg Q``: the photo through a JPEG of quality Q first. Seconds per photo; no fit.
 """
@@ -58,19 +58,27 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
             masks = np.asarray(scene.masks, bool)
         else:
             masks = np.stack([drawn_masks.family(name, m, rng) for m in scene.masks])
-        rows = []
+        evidence = []                  # the pose's own path: every totem, then pooled
         for j, m in enumerate(masks):
-            P_true = truth.totem_pose[j]
-            dist = np.linalg.norm(P_true)
             try:
-                P_mask = pose.initial_pose(m[None], K, R[j])[0]
+                pose.initial_pose(m[None], K, R[j])
+                evidence.append(pose_combined.totem_evidence(m, R[j], K, grad, j=j))
             except BadInput:
+                evidence.append(None)
+        shares = pose_combined.shared_shares(evidence, [
+            None if e is None else
+            pose_combined.edge_share(e.x_near, e.S_near, e.width, e.x_rim)
+            for e in evidence])
+        rows = []
+        for j, (ev, p) in enumerate(zip(evidence, shares)):
+            if ev is None:
                 rows.append((np.nan,) * 5)
                 continue
-            P_photo = rim.refine_centre(P_mask, R[j], K, grad)
-            c = pose_combined.combine_centre(m, R[j], K, grad, j=j)
-            rows.append((100 * np.linalg.norm(P_mask - P_true) / dist,
-                         100 * np.linalg.norm(P_photo - P_true) / dist,
+            P_true = truth.totem_pose[j]
+            dist = np.linalg.norm(P_true)
+            c = pose_combined.weigh(ev, R[j], K, p=p)
+            rows.append((100 * np.linalg.norm(ev.mask_center - P_true) / dist,
+                         100 * np.linalg.norm(ev.rim_center - P_true) / dist,
                          100 * np.linalg.norm(c.center - P_true) / dist,
                          covered(c, P_true),
                          100 * c.sd_along / dist))

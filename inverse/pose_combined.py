@@ -10,7 +10,8 @@ measures the mask's error arc by arc:
 ``o_a`` the offset along the outward normal ``n_a`` of the edge nearest the outline on
 arc ``a`` (the nearest local peak of the blurred photo's step across it, not the
 strongest: the rim's reflection band puts a stronger edge 1.5-4 px inside on some
-arcs), ``b`` the edge's own bias (:data:`EDGE_BIAS_PX`) and ``e_a`` the arcs' scatter.
+arcs), ``b`` the edge's own bias (:func:`edge_bias_px`, a function of the outline's
+radius) and ``e_a`` the arcs' scatter.
 A robust least-squares fit over the arcs (:func:`fit_offsets`) gives ``x_p`` and its
 covariance ``S_p``, to which the bias's spread from totem to totem is added.
 
@@ -36,8 +37,13 @@ edge is the silhouette is never certain where two lie apart); plus the mask outl
 own, mapped to the centre by the Jacobian of ``x -> P``: one sd along the line of sight
 and across it.
 
+The photo's totems share evidence (:func:`shared_shares`): where a totem's nearest edge
+and its rim's strongest edge disagree on the size, the one nearer the other totems' rim
+size is taken (their masks were drawn alike, and the band wins the rim on few totems).
+
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
-weighed" and "pose: the mask's share weighed softly, and a sd that covers".
+weighed", "pose: the mask's share weighed softly, and a sd that covers" and "pose: the
+edge's bias by the outline's radius, and the photo's totems pooled".
 """
 
 from __future__ import annotations
@@ -50,18 +56,22 @@ from inverse import pose, rim
 from scenes import camera, silhouette
 
 __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
-           "EDGE_BIAS_SD_PX", "ITERATIONS", "CONFIRM_SD", "CONFIRM_SOFT_SD",
-           "SHAPE_QUANT_PX", "TIGHT_WIDTHS", "TIGHT_SOFT_WIDTHS", "NEAR_ITERATIONS",
-           "REFINE_ITERATIONS", "REFINE_WINDOW_PX", "OUTER_PX", "OUTER_SOFT_PX",
-           "AMBIGUITY", "move_of", "edge_share", "POSE_FROM",
-           "uncertainty_record", "initial_centres", "CombinedPose", "edge_offsets",
-           "fit_offsets", "photo_move", "combine_centre", "combined_poses"]
+           "EDGE_BIAS_PER_PX", "EDGE_BIAS_RADII_PX", "EDGE_BIAS_SD_PX", "ITERATIONS",
+           "CONFIRM_SD", "CONFIRM_SOFT_SD", "SHAPE_QUANT_PX", "TIGHT_WIDTHS",
+           "TIGHT_SOFT_WIDTHS", "NEAR_ITERATIONS", "REFINE_ITERATIONS", "REFINE_WINDOW_PX",
+           "OUTER_PX", "OUTER_SOFT_PX", "AMBIGUITY", "SHARED_SD_PX", "move_of",
+           "edge_share", "POSE_FROM", "uncertainty_record", "initial_centres",
+           "CombinedPose", "edge_offsets", "edge_bias_px", "fit_offsets", "photo_move",
+           "Evidence", "totem_evidence", "weigh", "shared_shares", "combine_centre",
+           "combined_poses"]
 
 ARCS = 12              # arcs the outline is cut into (each one edge offset)
 WINDOW_PX = 3.0        # how far along each normal the nearest edge is looked for (pixels)
 STEP_PX = 0.25         # the profile's sampling step along the normal (pixels)
 PEAK_FRACTION = 0.3    # a local peak counts when at least this fraction of its arc's top
-EDGE_BIAS_PX = -0.15   # where the nearest edge lies from the silhouette (pixels, outward)
+EDGE_BIAS_PX = 0.12    # where the nearest edge lies from the silhouette (pixels, outward)
+EDGE_BIAS_PER_PX = -0.009  # ... less this per pixel of the outline's radius (the band)
+EDGE_BIAS_RADII_PX = (10.0, 65.0)  # the radii that bias was measured over (pixels)
 EDGE_BIAS_SD_PX = 0.2   # that bias's spread from totem to totem (pixels, 1 sd)
 EDGE_LATERAL_SD_PX = 0.5  # the nearest edge's sideways offset from totem to totem (1 sd)
 ITERATIONS = 3         # re-measurements from the moved outline
@@ -76,6 +86,7 @@ TIGHT_SOFT_WIDTHS = 0.1  # units of the edge's width), the share falling every t
 CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd,
 CONFIRM_SOFT_SD = 0.25  # ... and the mask's share falls by exp(-1/2) every this much
 AMBIGUITY = 0.1        # the mixture's variance counts p as if within this of 0 and 1
+SHARED_SD_PX = 0.3     # the least spread of a mask's size error among a photo's totems
 
 
 @dataclass
@@ -164,6 +175,15 @@ _REACH = np.array([rim.SHIFT_PX, rim.SHIFT_PX, rim.GROW_PX])
 _BIAS_SD = np.array([EDGE_LATERAL_SD_PX, EDGE_LATERAL_SD_PX, EDGE_BIAS_SD_PX])
 
 
+def edge_bias_px(P, R: float, K) -> float:
+    """Where the photo's nearest edge lies from the silhouette of the sphere (``P`` (3,)
+    metres, ``R`` metres), pixels outward: a little outside on small outlines, inside on
+    large ones, where the rim's reflection band (a fixed fraction of the radius) pulls
+    it in."""
+    r_px = K[0, 0] * np.tan(np.arcsin(np.clip(R / np.linalg.norm(P), 0.0, 1.0)))
+    return EDGE_BIAS_PX + EDGE_BIAS_PER_PX * float(np.clip(r_px, *EDGE_BIAS_RADII_PX))
+
+
 def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATIONS,
                window_px: float = WINDOW_PX):
     """The photo's nearest edge as a move ``x`` (3,) pixels of ``P0``'s outline (du, dv,
@@ -172,10 +192,11 @@ def photo_move(P0, R: float, K, grad, *, start=None, iterations: int = ITERATION
     outline moved there, measured again."""
     x = np.zeros(3) if start is None else np.asarray(start, np.float64).copy()
     cov, width = np.diag([np.inf] * 3), np.nan
+    bias = edge_bias_px(P0, R, K)
     for _ in range(iterations):
         normals, off, wid = edge_offsets(rim._moved(P0, R, K, x), R, K, grad,
                                          window_px=window_px)
-        dx, found = fit_offsets(normals, off - EDGE_BIAS_PX)
+        dx, found = fit_offsets(normals, off - bias)
         if not np.all(np.isfinite(found)) and np.all(np.isfinite(cov)):
             break             # no edge this time: keep the last measurement
         cov = found
@@ -231,9 +252,26 @@ def _jacobian(P0, R, K, x, h=0.05) -> np.ndarray:
                      / (2 * h) for e in np.eye(3)], 1)
 
 
-def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
-    """:class:`CombinedPose` of one totem from its mask (H, W) bool and the photo's
-    gradients ``grad`` (:func:`scenes.silhouette.gradients`, ``rim.SIGMA_PX``)."""
+@dataclass
+class Evidence:
+    """What the mask and the photo say of one totem's outline, before weighing: moves
+    ``x`` (3,) pixels of the mask's outline (du, dv, g) and their covariances (3, 3)."""
+
+    mask_center: np.ndarray  # (3,) metres, the mask's own pose
+    shape_rms_px: float      # the mask outline's rms distance from the best sphere outline
+    extra2: float            # the mask outline's own variance beyond a pixel mask's (px^2)
+    x_near: np.ndarray       # the edge nearest the mask's outline (:func:`photo_move`)
+    S_near: np.ndarray
+    width: float             # that edge's median width (px)
+    x_rim: np.ndarray        # the rim's strongest edge (:mod:`inverse.rim`), bias off
+    x_far: np.ndarray        # ... refined by the nearest peaks
+    S_far: np.ndarray
+    rim_center: np.ndarray   # (3,) metres, the rim's own pose (``--pose-from photo``)
+
+
+def totem_evidence(mask, R: float, K, grad, *, j: int = 0) -> Evidence:
+    """:class:`Evidence` of one totem from its mask (H, W) bool and the photo's gradients
+    ``grad`` (:func:`scenes.silhouette.gradients`, ``rim.SIGMA_PX``)."""
     K = np.asarray(K, np.float64)
     uv = pose.mask_outline_uv(mask, j=j)
     rays = camera.pixel_rays(K, uv[:, 0], uv[:, 1])
@@ -246,11 +284,25 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     x_n, S_n, width = photo_move(P_m, R, K, grad, iterations=NEAR_ITERATIONS)
     # the rim's strongest edge near the mask (inverse.rim), its bias taken off, refined
     # by the nearest peaks
-    x_r = move_of(P_m, rim.refine_centre(P_m, R, K, grad), R, K)
-    x_r[2] -= EDGE_BIAS_PX
+    P_r = rim.refine_centre(P_m, R, K, grad)
+    x_r = move_of(P_m, P_r, R, K)
+    x_r[2] -= edge_bias_px(P_m, R, K)
     x_f, S_f, _ = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
                              window_px=REFINE_WINDOW_PX)
-    p = edge_share(x_n, S_n, width, x_r)
+    return Evidence(mask_center=P_m, shape_rms_px=float(shape_rms), extra2=extra2,
+                    x_near=x_n, S_near=S_n, width=width, x_rim=x_r, x_far=x_f, S_far=S_f,
+                    rim_center=P_r)
+
+
+def weigh(ev: Evidence, R: float, K, *, p: float | None = None) -> CombinedPose:
+    """:class:`CombinedPose` from one totem's :class:`Evidence`: the on-edge and the
+    off-edge moves mixed by the mask's share ``p`` (default :func:`edge_share` of the
+    evidence alone)."""
+    K = np.asarray(K, np.float64)
+    P_m, extra2 = ev.mask_center, ev.extra2
+    x_n, S_n, x_f, S_f = ev.x_near, ev.S_near, ev.x_far, ev.S_far
+    if p is None:
+        p = edge_share(x_n, S_n, ev.width, ev.x_rim)
     x1, v1, w1 = _weighed(x_n, S_n, True, extra2)
     x0, v0, w0 = _weighed(x_f, S_f, False, extra2)
     q = min(max(p, AMBIGUITY), 1.0 - AMBIGUITY)
@@ -266,11 +318,50 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
     across = float(np.sqrt(max(0.5 * (np.trace(C) - los @ C @ los), 0.0)))
     return CombinedPose(center=P, sd_along=along, sd_across=across, mask_center=P_m,
                         photo_move=x_p, photo_cov=S, weight=w,
-                        shape_rms_px=float(shape_rms), edge_share=p)
+                        shape_rms_px=ev.shape_rms_px, edge_share=p)
+
+
+def shared_shares(evidence, shares) -> list:
+    """Each totem's share ``p`` weighed again by what the photo's other totems say of
+    their masks' size error: where the edge nearest the mask (``x_near``) and the rim's
+    strongest edge (``x_rim``) disagree, the one nearer the others' rim size (their
+    median, spread by their median absolute deviation, at least :data:`SHARED_SD_PX`)
+    wins: ``p`` moves as a share kept within :data:`AMBIGUITY` of 0 and 1 would (a
+    likelihood ratio of 1 leaves it as it is). Masks drawn in
+    one photo share how they were drawn (pixel-exact, a brush too wide, a polygon's
+    chords), and the rim's edge is the band's on few totems at once. ``evidence``: a
+    list of :class:`Evidence` or None (an unusable mask), ``shares`` the same length;
+    returns the new shares (None where the evidence is)."""
+    g = np.array([e.x_rim[2] if e is not None else np.nan for e in evidence])
+    out = []
+    for j, (e, p) in enumerate(zip(evidence, shares)):
+        others = np.delete(g, j)
+        others = others[np.isfinite(others)]
+        if e is None or len(others) < 2:           # no photo to share with
+            out.append(p)
+            continue
+        mu = np.median(others)
+        tau2 = max(SHARED_SD_PX ** 2, (1.4826 * np.median(np.abs(others - mu))) ** 2)
+        log_like = []                  # the near edge's, then the rim's (refined)
+        for x, S in ((e.x_near, e.S_near), (e.x_far, e.S_far)):
+            v = tau2 + (S[2, 2] if np.isfinite(S[2, 2]) else rim.MASK_SIGMA_PX ** 2)
+            log_like.append(-0.5 * (x[2] - mu) ** 2 / v - 0.5 * np.log(v))
+        q = min(max(p, AMBIGUITY), 1.0 - AMBIGUITY)
+        odds = np.log(q / (1 - q)) + log_like[0] - log_like[1]
+        moved = 1.0 / (1.0 + np.exp(-np.clip(odds, -50, 50))) - q
+        out.append(float(min(max(p + moved, 0.0), 1.0)))
+    return out
+
+
+def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
+    """:class:`CombinedPose` of one totem alone from its mask (H, W) bool and the photo's
+    gradients ``grad`` (:func:`scenes.silhouette.gradients`, ``rim.SIGMA_PX``)."""
+    return weigh(totem_evidence(mask, R, K, grad, j=j), R, K)
 
 
 def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
-    """:func:`combine_centre` for every totem: ``image`` (H, W, 3) sRGB [0, 1], ``masks``
+    """Every totem's :class:`CombinedPose`, its share weighed with the photo's others
+    (:func:`shared_shares`): ``image`` (H, W, 3) sRGB [0, 1], ``masks``
     (n, H, W) bool, ``K`` (3, 3), ``radius`` (n,) or one, metres. BadInput for an
     unusable mask or key (:func:`inverse.pose.initial_pose` checks them first)."""
     masks = np.asarray(masks, bool)
@@ -280,8 +371,10 @@ def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
     pose.initial_pose(masks, K, R)                  # the masks' and key's checks
     grad = silhouette.gradients(np.ascontiguousarray(np.asarray(image, np.float32)),
                                 rim.SIGMA_PX)
-    return [combine_centre(m, float(r), K, grad, j=j) for j, (m, r) in
-            enumerate(zip(masks, R))]
+    ev = [totem_evidence(m, float(r), K, grad, j=j) for j, (m, r) in
+          enumerate(zip(masks, R))]
+    p = shared_shares(ev, [edge_share(e.x_near, e.S_near, e.width, e.x_rim) for e in ev])
+    return [weigh(e, float(r), K, p=pj) for e, r, pj in zip(ev, R, p)]
 
 
 POSE_FROM = ("both", "photo", "mask")

@@ -192,3 +192,51 @@ def test_exact_masks_on_a_photo_through_a_pixel_filter_keep_the_masks_pose(scene
     P_mask = pose.initial_pose(masks, sc.K, sc.radius)
     d = np.linalg.norm(P_mask, axis=1)
     assert np.all(np.linalg.norm([c.center for c in poses] - P_mask, axis=1) / d < 1e-3)
+
+
+def _evidence(g_near, g_rim, *, lateral=(0.0, 0.0)):
+    """A totem's :class:`Evidence` whose nearest edge puts the silhouette ``g_near`` px
+    outside the mask's outline (moved by ``lateral``) and the rim's strongest edge
+    ``g_rim`` px outside it, each measured to 0.25 px."""
+    S = np.diag([0.5 ** 2, 0.5 ** 2, 0.25 ** 2])
+    return pose_combined.Evidence(
+        mask_center=P0, shape_rms_px=0.2, extra2=0.0, width=1.2,
+        x_near=np.array([*lateral, g_near]), S_near=S,
+        x_rim=np.array([0.0, 0.0, g_rim]), x_far=np.array([0.0, 0.0, g_rim]), S_far=S,
+        rim_center=P0)
+
+
+def test_the_photos_other_totems_decide_between_the_near_edge_and_the_rim():
+    """Where a totem's nearest edge and its rim's strongest edge disagree on the size,
+    the share goes to the one the photo's other totems' rims agree with: exact masks
+    whose rims lie on them keep a mask whose rim took the band 2 px inside; masks drawn
+    3 px too large drop a mask whose nearest edges lie on a shadow outside."""
+    exact = [_evidence(0.0, -2.0)] + [_evidence(0.0, g) for g in (0.1, -0.1, 0.0)]
+    grown = [_evidence(0.0, -3.0, lateral=(2.0, 0.0))] + \
+        [_evidence(-0.2, g) for g in (-2.9, -3.1, -3.0)]
+    for photo, rises in ((exact, True), (grown, False)):
+        p = pose_combined.shared_shares(photo, [0.5] * 4)
+        assert (p[0] > 0.9) if rises else (p[0] < 0.1), p
+    # a totem alone, or an unusable mask beside it, has no photo to share with
+    assert pose_combined.shared_shares([exact[0]], [0.3]) == [0.3]
+    assert pose_combined.shared_shares([exact[0], None, exact[1]], [0.3, None, 0.8]) == \
+        [0.3, None, 0.8]
+
+
+def test_the_edge_bias_follows_the_outline_radius():
+    """The nearest edge's bias: outside the silhouette on a small outline, inside on a
+    large one (the band pulls it, a fraction of the radius), never extrapolated beyond
+    the radii it was measured on."""
+    def bias(dist):                          # the outline's radius is f tan(asin(R / d))
+        return pose_combined.edge_bias_px(np.array([0.0, 0.0, dist]), R0, K)
+
+    f = K[0, 0]
+    r_px = [f * np.tan(np.arcsin(R0 / d)) for d in (4.0, 2.0, 1.0, 0.4)]
+    b = [bias(d) for d in (4.0, 2.0, 1.0, 0.4)]
+    assert r_px[0] < 10 and r_px[-1] > 65         # the ends are clamped ...
+    lo, hi = pose_combined.EDGE_BIAS_RADII_PX
+    assert b[0] == pytest.approx(pose_combined.EDGE_BIAS_PX
+                                 + pose_combined.EDGE_BIAS_PER_PX * lo)
+    assert b[-1] == pytest.approx(pose_combined.EDGE_BIAS_PX
+                                  + pose_combined.EDGE_BIAS_PER_PX * hi)
+    assert b[0] > 0 > b[-1] and np.all(np.diff(b) < 0)   # ... and it falls with the size
