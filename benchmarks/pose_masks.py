@@ -8,8 +8,8 @@ For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask fa
 ``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
 distance, median and worst, for the mask's own pose, the photo's rim and the two weighed
-(each photo's totems pooled, as ``totems fit`` does), and how often the weighed pose's reported uncertainty covers its true error (the true
-centre inside the 95 % ellipsoid of its sd along the line of sight and across it).
+(each photo's totems pooled, as ``totems fit`` does), and how often the weighed pose's
+reported uncertainty covers its true error (the true the 95 % ellipsoid of its sd along the line of sight and across it).
 ``--jpeg Q``: the photo through a JPEG of quality Q first. Seconds per photo; no fit.
 """
 
