@@ -9,7 +9,8 @@ For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask fa
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
 distance, median and worst, for the mask's own pose, the photo's rim and the two weighed
 (each photo's totems pooled, as ``totems fit`` does), and how often the weighed pose's
-reported uncertainty covers its true error (the true the 95 % ellipsoid of its sd along the line of sight and across it).
+reported uncertainty covers its true error (the true centre inside the 95 % ellipsoid
+of its sd along the line of sight and across it).
 ``--jpeg Q``: the photo through a JPEG of quality Q first. Seconds per photo; no fit.
 """
 
