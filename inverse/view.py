@@ -14,7 +14,8 @@ Public
 ``column_depth(density, frame)``: the grid's surface depth per column;
 ``peak_points(...)``: where the totem rays end in the grid;
 ``choose_view(rays, frame, grid_depth, grid_view, grid_points, size, ...) -> StereoView``;
-``stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo) -> (H, W)``.
+``stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo) -> (H, W)``;
+``preference(grid, stereo, margin, band) -> [0, 1]``: the whole view's leaning to stereo.
 """
 
 from __future__ import annotations
@@ -54,7 +55,9 @@ class StereoView:
         map's divided by ``margin``): "grid" or a stereo map ("stereo",
         "stereo_far1": see ``far_biases``).
     holdout : {name: leave-one-totem-out L1 (sRGB)} for every candidate.
-    stereo_share : fraction of the image taken from the stereo view (0 = the grid's).
+    stereo_share : fraction of the image taken from the stereo view (0 = the grid's);
+        pixels with too few held-out rays to choose lean as the whole view does
+        (:func:`preference`: continuous across the margin).
     recon : (H, W, 3) sRGB [0, 1]: per pixel, the grid's view or the view splatted at
         the best stereo map, whichever's held-out totems erred less nearby.
     depth : (H, W) metres, the same blend of the two depths.
@@ -93,7 +96,20 @@ def _points_where(points, K, weight, take_high: bool):
     return points[keep]
 
 
-def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
+def preference(grid: float, stereo: float, margin: float = 0.9, band: float = 0.05) -> float:
+    """How much the whole view leans to stereo, in [0, 1], from the two geometries'
+    held-out errors: 1 when ``stereo / margin`` is below the grid's by more than
+    ``band`` (relative), 0 when above by more, linear between. Continuous, so that a
+    fit's last bits cannot swap one whole view for the other."""
+    if not (np.isfinite(stereo) and stereo > 0):
+        return 0.0
+    if not (np.isfinite(grid) and grid > 0):
+        return 1.0
+    ratio = stereo / margin / grid
+    return float(np.clip((1.0 + band - ratio) / (2.0 * band), 0.0, 1.0))
+
+
+def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: float,
                   sigma: float = 16.0, min_rays: float = 0.05,
                   margin: float = 1.0) -> np.ndarray:
     """Per pixel, how much of the view comes from stereo (H, W) in [0, 1].
@@ -102,9 +118,9 @@ def stereo_weight(grid_errors, stereo_errors, size, *, prefer_stereo: bool,
     :func:`inverse.splat.holdout_errors` for each geometry. A pixel takes the geometry
     whose held-out rays landing nearby (Gaussian of ``sigma`` px) erred less (stereo's
     error counted as ``1 / margin`` times what it is); where
-    either has fewer than ``min_rays`` such rays, the whole view's choice
-    (``prefer_stereo``). The 0/1 choice is then smoothed (``sigma / 2``) so the two
-    views meet without a seam.
+    either has fewer than ``min_rays`` such rays, the whole view's leaning
+    (``prefer_stereo`` in [0, 1], :func:`preference`). The choice is then smoothed
+    (``sigma / 2``) so the two views meet without a seam.
     """
     err_g, n_g = error_map(*grid_errors[:3], size, sigma=sigma)
     err_s, n_s = error_map(*stereo_errors[:3], size, sigma=sigma)
@@ -172,7 +188,8 @@ def choose_view(rays: TotemRays, frame: FrustumFrame, grid_depth, grid_view, gri
                           np.asarray(grid_points, np.float64))
     best = min(stereo_names, key=holdout.get)
     weight = stereo_weight(errors["grid"], errors[best], size,
-                           prefer_stereo=chosen != "grid", sigma=sigma, min_rays=min_rays,
+                           prefer_stereo=preference(holdout["grid"], holdout[best], margin),
+                           sigma=sigma, min_rays=min_rays,
                            margin=margin)
     _, u, v, z, hit = errors[best]
     stereo_view = _display(splat_image(u, v, radiance, size, hit=hit))

@@ -207,3 +207,17 @@ def test_blur_is_ndimages_gaussian_on_a_map():
     img = np.random.default_rng(2).uniform(0, 1, (H, W))
     for sigma in (8.0, 16.0):
         assert np.allclose(blur(img, sigma), ndimage.gaussian_filter(img, sigma), atol=1e-12)
+
+
+def test_the_whole_views_leaning_to_stereo_is_continuous_across_the_margin():
+    """A fit's last bits must not swap one whole view for the other: the leaning moves
+    from 1 to 0 over the band around the margin, never by a jump."""
+    from inverse.view import preference
+
+    grid = 0.05
+    ratios = np.linspace(0.8, 1.2, 401)
+    lean = np.array([preference(grid, r * 0.9 * grid, margin=0.9, band=0.05) for r in ratios])
+    assert lean[0] == 1.0 and lean[-1] == 0.0
+    assert np.all(np.diff(lean) <= 0) and np.max(np.abs(np.diff(lean))) < 0.02
+    assert abs(preference(grid, 0.9 * grid, margin=0.9) - 0.5) < 1e-12
+    assert preference(grid, np.inf) == 0.0 and preference(np.inf, grid) == 1.0
