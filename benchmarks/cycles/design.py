@@ -96,9 +96,26 @@ def _camera(rng, kind: str, width: int, height: int) -> dict:
             "width": int(width), "height": int(height)}
 
 
+BANDS = ((0.55, 0.08), (0.35, 0.05), (0.15, 0.03))
+"""The totems' band of image rows (its top, a share of the height) and the floating
+totems' clearance above the support (m), tried in turn until the totems fit: a camera
+low over a table sees little of it below the first band's top."""
+
+
 def _totems(rng, cam: dict, support_z: float, radius: float, n: int) -> list:
     """``n`` totem centres (world), the first resting on the support, the others
-    floating; each silhouette whole in the lower part of the image, apart."""
+    floating; each silhouette whole in the lower part of the image, apart. The first of
+    ``BANDS`` that places them all (a seed placed in the first band draws as before)."""
+    for top, clear in BANDS:
+        placed = _place(rng, cam, support_z, radius, n, top, clear)
+        if placed:
+            return placed
+    raise RuntimeError("could not place the totems; try another seed")
+
+
+def _place(rng, cam, support_z, radius, n, top, clear) -> list | None:
+    """Totems in image rows from ``top`` of the height down, floating ones at least
+    ``clear`` above the support; None when 20000 draws do not place all ``n``."""
     W, H = cam["width"], cam["height"]
     K, w2c = bc.opencv_from_blender(**{k: v for k, v in cam.items() if k not in
                                        ("width", "height")}, width=W, height=H)
@@ -112,7 +129,7 @@ def _totems(rng, cam: dict, support_z: float, radius: float, n: int) -> list:
             placed, discs = [], []
         resting = not placed
         u = rng.uniform(0.1 * W, 0.9 * W)
-        v = rng.uniform(0.55 * H, (0.97 if resting else 0.9) * H)
+        v = rng.uniform(top * H, (0.97 if resting else 0.9) * H)
         ray = np.linalg.solve(K, [u, v, 1.0])
         d_w = c2w[:3, :3] @ ray
         o_w = c2w[:3, 3]
@@ -125,7 +142,7 @@ def _totems(rng, cam: dict, support_z: float, radius: float, n: int) -> list:
         P_w = o_w + t * d_w
         P_c = w2c[:3, :3] @ P_w + w2c[:3, 3]
         depth = np.linalg.norm(P_c)
-        low = P_w[2] < support_z + radius + 0.08
+        low = P_w[2] < support_z + radius + clear
         if not 1.0 <= depth <= 2.2 or (not resting and low):
             continue
         r_px = K[0, 0] * radius / np.sqrt(max(depth**2 - radius**2, 1e-9)) * 1.15
@@ -136,9 +153,7 @@ def _totems(rng, cam: dict, support_z: float, radius: float, n: int) -> list:
             continue
         placed.append({"centre": P_w.tolist(), "resting": resting})
         discs.append((uc, vc, r_px))
-    if len(placed) < n:
-        raise RuntimeError("could not place the totems; try another seed")
-    return placed
+    return placed if len(placed) == n else None
 
 
 def _objects(rng, kind: str, support_z: float) -> list:
