@@ -66,3 +66,20 @@ def test_no_band_places_raises(monkeypatch):
     monkeypatch.setattr(design, "BANDS", ((0.55, 5.0),))      # no totem floats 5 m up
     with pytest.raises(RuntimeError):
         design.describe(101, size=(160, 120))
+
+
+def test_metering_keeps_highlights_under_the_views_white():
+    """Log-average to 0.18 where nothing clips; where half the photo would go past
+    Standard's white (1), the exposure comes down until at most 5 % does; Filmic's
+    white (16.3) leaves the same photo at its log-average."""
+    import numpy as np
+
+    grey = np.full((20, 20, 3), 0.05)
+    assert design.metered_ev(grey, "Standard") == pytest.approx(np.log2(0.18 / 0.05))
+    img = np.full((20, 20, 3), 0.01)
+    img[:10] = 10.0                                   # a bright floor: half the photo
+    avg = np.log2(0.18 / np.sqrt(0.01 * 10.0))        # log-average luminance 0.316
+    ev = design.metered_ev(img, "Standard")
+    assert ev == pytest.approx(np.log2(1.0 / 10.0)) and ev < avg - 2
+    assert (img.max(-1) * 2**ev > 1.0 + 1e-9).mean() <= 0.05
+    assert design.metered_ev(img, "Filmic") == pytest.approx(avg)

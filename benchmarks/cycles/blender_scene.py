@@ -297,17 +297,18 @@ def render_linear(path: str, pipeline: dict) -> np.ndarray:
 
 
 def meter(path: str, pipeline: dict) -> float:
-    """A camera's metering: the exposure (stops) that brings the log-average luminance
-    of a quick, coarse linear render (an eighth of the size, 4 samples) to 0.18."""
+    """A camera's metering (``design.metered_ev``: log-average luminance to 0.18, the
+    highlights kept under the view's white) of a quick, coarse linear render (an eighth
+    of the size, 4 samples)."""
+    import design
+
     sc = bpy.context.scene
     sc.render.resolution_percentage = 12
     try:
         lin = render_linear(path, dict(pipeline, samples=4, denoise=False))
     finally:
         sc.render.resolution_percentage = 100
-    Y = lin @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    key = float(np.exp(np.mean(np.log(np.maximum(Y, 1e-4)))))
-    return float(np.log2(0.18 / key))
+    return design.metered_ev(lin, pipeline["view_transform"])
 
 
 def render_ids(path: str) -> np.ndarray:

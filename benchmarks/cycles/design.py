@@ -16,7 +16,7 @@ try:                                     # run as a script inside .venv-cycles
 except ImportError:                      # imported from the package's venv
     from benchmarks.cycles import blender_camera as bc
 
-__all__ = ["KINDS", "HDRIS", "describe", "ablate"]
+__all__ = ["KINDS", "HDRIS", "describe", "ablate", "metered_ev"]
 
 KINDS = ("room", "yard", "table")
 HDRIS = ("courtyard", "forest", "city", "sunset", "sunrise", "interior", "studio")
@@ -25,6 +25,27 @@ TEXTURES = ("checker", "noise", "brick", "wave", "voronoi", "magic", "plain")
 VIEWS = ("AgX", "Filmic", "Standard")
 FILTERS = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 GLASSES = ("glass", "refraction")
+VIEW_WHITE = {"Standard": 1.0, "AgX": 0.18 * 2**4.026, "Filmic": 0.18 * 2**6.5}
+"""The scene-linear value each view transform shows as white (Blender's OCIO config:
+Standard clips at 1, AgX's range ends 4.03 stops and Filmic's 6.5 stops above 0.18)."""
+HIGHLIGHT_Q = 0.95
+"""The metering keeps this share of the photo's pixels (their largest channel) at or
+under the view's white."""
+
+
+def metered_ev(lin, view: str) -> float:
+    """A camera's metering of a scene-linear image (H, W, 3): the exposure (stops) that
+    brings its log-average luminance to 0.18, lowered where needed so that no more than
+    5 % of its pixels go past the view's white (a photo metered on the average alone
+    clipped a bright floor white under Standard, room-s207)."""
+    lin = np.asarray(lin, np.float64)
+    Y = lin @ np.array([0.2126, 0.7152, 0.0722])
+    key = float(np.exp(np.mean(np.log(np.maximum(Y, 1e-4)))))
+    ev = np.log2(0.18 / key)
+    high = float(np.quantile(lin.max(axis=-1), HIGHLIGHT_Q))
+    if high > 0:
+        ev = min(ev, np.log2(VIEW_WHITE[view] / high))
+    return float(ev)
 
 
 def scene_options(ap) -> None:
