@@ -78,12 +78,19 @@ def check_rows(rows: list[dict], set_name: str = "calibration") -> None:
         if r["statistic"] is None:
             raise BadInput(f"{r['name']}: report.json has no statistic; verify again "
                            f"with this code (totems bench --reverify)")
-        own = sets.SEEDS[set_name].get(r["preset"], ())
-        if r["seed"] not in own:
-            other = [s for s, by in sets.SEEDS.items() if r["seed"] in by.get(r["preset"], ())]
+        if r["seed"] not in _seeds(set_name, r["preset"]):
+            other = [s for s in sets.SEEDS if r["seed"] in _seeds(s, r["preset"])]
             raise BadInput(f"{r['name']}: {r['preset']} seed {r['seed']} belongs to "
                            f"{other[0] if other else 'no set'}, not the {set_name} set; "
                            f"a calibration never sees another set's seeds")
+
+
+def _seeds(set_name: str, preset: str):
+    """The set's seeds of a preset; a Cycles scene's preset (``cycles-<kind>``) takes
+    the set's Cycles seeds (``sets.CYCLES``)."""
+    if preset.startswith("cycles-"):
+        return sets.CYCLES.get(set_name, ((),))[0]
+    return sets.SEEDS[set_name].get(preset, ())
 
 
 def _commit() -> str:

@@ -121,6 +121,17 @@ def test_the_calibration_refuses_the_benchmarks_seeds(tmp_path, capsys):
     assert err.count("\n") == 0 and "box seed 3 belongs to benchmark" in err
 
 
+def test_the_calibration_takes_its_own_cycles_seeds_only(tmp_path, capsys):
+    rows = [(f"{p}-{s}", p, s, 0.01 * s * (1 + k))
+            for k, p in enumerate(("box", "envmap")) for s in range(11, 19)]
+    cyc = [(f"cycles-room-s{s}", "cycles-room", s, 0.002 * s) for s in (201, 203, 207)]
+    assert calibrate_verdict.main([str(_bench(tmp_path / "a", rows + cyc))]) == 0
+    assert "| cycles-room | 3 |" in capsys.readouterr().out
+    dev = [("cycles-room-s103", "cycles-room", 103, 0.3)]        # development's seed
+    assert calibrate_verdict.main([str(_bench(tmp_path / "b", rows + dev))]) == 2
+    assert "cycles-room seed 103 belongs to development" in capsys.readouterr().err
+
+
 def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys):
     rows = [(f"{p}-{s}", p, s, 0.01 * s * (1 + k))
             for k, p in enumerate(("box", "envmap", "window")) for s in range(11, 19)]
