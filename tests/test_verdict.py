@@ -6,7 +6,8 @@ import pytest
 from scenes.errors import BadInput
 from verify import patches, verdict
 from verify.report import verify_scene
-from verify_cases import SQUARE, box_mask, make_fit, make_scene, texture, with_square
+from verify_cases import (SQUARE, box_mask, make_fit, make_scene, points_in_box, texture,
+                          with_square)
 
 
 def test_score_is_the_mean_of_the_worst_patches():
@@ -117,3 +118,46 @@ def test_threshold_override_and_no_patches():
     g = patches.patch_grid(make_scene().masks.any(axis=0))
     with pytest.raises(BadInput, match="cannot be verified"):
         verdict.decide({"RANGE": np.ones((30, 30))}, np.zeros((30, 30)), g)
+
+
+def test_only_pixels_a_patch_can_judge_count_as_judged():
+    # a protected region below the patch grid (which stops at the highest totem's row):
+    # its pixels were counted as judged (a third of the photo), though no patch judges
+    # them; a photo judged by ABSENT alone there is unverifiable, not consistent
+    photo = texture()
+    fit = make_fit(photo)
+    fit.totem_points = points_in_box((40, 140, 280, 240), 8000)
+    rep = verify_scene(make_scene(photo), fit, calibration=None)
+    seen = rep.protected & ~rep.totem_mask
+    assert seen[rep.grid.y_valid:].sum() > 0.6 * seen.sum()     # mostly below the grid
+    assert seen.sum() > 0.25 * (~rep.totem_mask).sum()          # the count it had before
+    assert rep.judged_fraction == 0.0 and not rep.judged.any()
+    assert rep.verdict == "unverifiable"
+    quiet = np.full((rep.grid.n, rep.grid.n), 0.01)
+    d = verdict.decide({"ABSENT": quiet}, np.ones_like(quiet), rep.grid, calibration=None,
+                       judged_fraction=rep.judged_fraction)
+    assert d.score < 1.0 and d.verdict == "unverifiable"
+    # a region across the grid's last row: judged only where its patches are half judged
+    fit.totem_points = points_in_box((40, 60, 280, 240), 12000)
+    rep = verify_scene(make_scene(photo), fit, calibration=None)
+    seen = rep.protected & ~rep.totem_mask
+    assert rep.judged.any() and not rep.judged[rep.grid.y_valid:].any()
+    assert rep.judged_fraction == pytest.approx(rep.judged.sum() / (~rep.totem_mask).sum())
+    assert 0.05 < rep.judged_fraction < 0.8 * seen.sum() / (~rep.totem_mask).sum()
+    assert (rep.judged == (seen & verdict.judgeable(seen, rep.grid))).all()
+
+
+def test_a_patch_judged_too_thinly_judges_nothing():
+    # a 10 x 10 grid of 8 px patches tiling 80 x 80: a sliver of 3 rows fills 37 % of
+    # its patches (not counted), a block of 5 rows 62 % (counted, but not below the grid)
+    totems = np.zeros((100, 80), bool)
+    totems[80:, :] = True
+    g = patches.patch_grid(totems, grid=10, patch=8)
+    assert g.y_valid == 80 and g.size == 8 and list(g.rows) == list(range(0, 80, 8))
+    judged = np.zeros((100, 80), bool)
+    judged[0:3, 8:16] = True                          # sliver: 24 of 64 pixels
+    judged[40:45, 16:24] = True                       # block: 40 of 64
+    judged[82:, :] = True                             # below the grid
+    out = verdict.judgeable(judged, g)
+    assert not out[0:3].any() and not out[80:].any()
+    assert out[40:45, 16:24].all() and out.sum() == 40

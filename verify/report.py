@@ -90,7 +90,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     keep = patches.patch_fraction(seen, grid) > 0
 
     # each metric judges the protected pixels where its evidence holds (sRGB [0, 1])
-    judged = seen if ev is None else seen & ev.resolved
+    # (only where a patch can judge them: the grid stops at the highest totem)
+    judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, grid)
     # (ABSENT judges the points in front of the surface its three totems resolve)
     inside = patches.patch_scores({m: e for m, e in errors.items() if m != "ABSENT"},
                                   grid, judged)

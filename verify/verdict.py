@@ -47,10 +47,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scenes.errors import BadInput
+from verify.patches import patch_fraction
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
            "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED", "Verdict",
-           "top_k", "metric_score", "decide", "name_drivers"]
+           "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
 
 RANGE_THRESHOLD = 0.387
 """RANGE score (mean of the worst patches' :func:`verify.patches.range_distance` over
@@ -88,7 +89,8 @@ MAX_DRIVERS = 8
 
 MIN_JUDGED = 0.05
 """A photo the metrics judge less than this fraction of, and find nothing wrong in, is
-``unverifiable``: the totems establish too little of it to call it consistent."""
+``unverifiable``: the totems establish too little of it to call it consistent. Only the
+pixels some patch can judge count (:func:`judgeable`)."""
 
 
 @dataclass
@@ -150,6 +152,24 @@ def metric_score(patch_scores: np.ndarray, used: np.ndarray, *,
     excess = np.where(used, s - (med if reference == "median" else 0.0), np.nan)
     k = top_k(int(used.sum()))
     return med, excess, float(np.sort(excess[used])[::-1][:k].mean())
+
+
+def judgeable(judged: np.ndarray, grid, *, min_cover: float = MIN_COVER) -> np.ndarray:
+    """The pixels of ``judged`` (H, W) bool that some patch of ``grid`` can judge, (H, W).
+
+    A patch enters the verdict when at least ``min_cover`` of it is judged, and the grid
+    stops at the highest totem's row, so judged pixels below it or in patches judged too
+    thinly weigh in no score: counted as judged they would let a photo that no patch can
+    judge pass for judged (see docs/decisions.md, 'verdict: only what a patch can judge
+    counts as judged').
+    """
+    judged = np.asarray(judged, bool)
+    a, b = np.nonzero(patch_fraction(judged, grid) >= min_cover)
+    y0, x0, s = grid.rows[a], grid.cols[b], grid.size
+    D = np.zeros((judged.shape[0] + 1, judged.shape[1] + 1), np.int32)
+    for dy, dx, sign in ((0, 0, 1), (0, s, -1), (s, 0, -1), (s, s, 1)):
+        np.add.at(D, (y0 + dy, x0 + dx), sign)          # each patch's box, summed below
+    return judged & (np.cumsum(np.cumsum(D, axis=0), axis=1)[:-1, :-1] > 0)
 
 
 _SHIPPED = "shipped"
