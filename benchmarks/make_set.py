@@ -121,11 +121,15 @@ def estimate_s(todo: dict, *, size, jobs: int) -> float:
 # --------------------------------------------------------------------------- doing
 
 def make_one(out: str, photo, size, spp) -> str:
-    """Make the untouched scene of ``photo``; returns a line for the log."""
+    """Make the untouched scene of ``photo``; returns a line for the log (a seed whose
+    scene cannot be made, e.g. a totem hidden behind an object, is skipped and says why)."""
     t0 = time.perf_counter()
     kw = {} if spp is None else {"spp": spp}
-    make_scene(Path(out) / photo.scene, preset=photo.preset, seed=photo.seed, size=size,
-               n_totems=photo.n_totems, placement=photo.placement, **kw)
+    try:
+        make_scene(Path(out) / photo.scene, preset=photo.preset, seed=photo.seed, size=size,
+                   n_totems=photo.n_totems, placement=photo.placement, **kw)
+    except BadInput as e:
+        return f"skipped {photo.scene}: {e}"
     return f"made {photo.scene} in {time.perf_counter() - t0:.0f} s"
 
 

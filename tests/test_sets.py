@@ -97,3 +97,12 @@ def test_each_sets_cycles_scenes_are_its_own():
     assert len(sets.CYCLES["benchmark"][0]) >= 5 and len(sets.CYCLES["calibration"][0]) >= 5
     small = make_set.cycles_command(Path("o"), "benchmark", small=True)
     assert small[4] == "2" and small[-1] == "--small"
+
+
+def test_a_seed_whose_scene_cannot_be_made_is_skipped_with_its_reason(tmp_path):
+    """At 32x24 no totem covers 20 pixels: the scene is refused, the set goes on, and
+    nothing that looks like a scene is left behind."""
+    photo = sets.Photo("envmap", 31)
+    line = make_set.make_one(str(tmp_path), photo, (32, 24), 1)
+    assert line.startswith(f"skipped {photo.scene}: ") and "fewer than 20 pixels" in line
+    assert not (tmp_path / photo.scene / "photo.png").exists()
