@@ -192,8 +192,8 @@ def fit_scene(scene: folder.Scene, *, fixed_pose: bool = False,
                     "holdout_L1": {k: round(float(e), 5) for k, e in chosen.holdout.items()}}
         recon, depth, totem_points = chosen.recon, chosen.depth, chosen.points
     geometry["support"] = None if plane is None else plane.to_dict()
-    if plane is not None:
-        recon, depth, totem_points, geometry["support"]["share"] = plane_view(
+    if plane is not None:        # the view capped; the rays' end points (the region) kept
+        recon, depth, _, geometry["support"]["share"] = plane_view(
             rays, frame, plane, recon, depth, totem_points, scene.size)
     t_stereo = time.perf_counter() - t0
 

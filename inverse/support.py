@@ -18,8 +18,10 @@ up the image (``N_y < 0``), which chooses between the two solutions of three tot
 where they first meet either the fit's chosen surface or the plane, so a table seen at
 grazing angles is placed where it is, not at the depth that explains each ray alone.
 Three floating totems also fix such a plane, so the fit uses it only when told the
-totems rest (``FitSettings.support_view``; see docs/decisions.md, "fit: the support
-plane").
+totems rest (``FitSettings.resting``, ``totems fit --resting``), and then for the view
+alone: the protected region stays where the fit's own rays end, since the plane's end
+points keep only the little of the table the totems saw (see docs/decisions.md, "fit:
+resting totems cap the view, not the region").
 """
 
 from __future__ import annotations

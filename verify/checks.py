@@ -166,6 +166,7 @@ def from_args(args) -> dict:
     region = ["--region", args.region]
     check_flags = [*(["--fixed-pose"] if args.fixed_pose else []),
                    *(["--oracle-pose"] if args.oracle_pose else []),
+                   *(["--resting"] if args.resting else []),
                    "--pose-from", args.pose_from, *region]
     say = None if args.quiet or args.json else _say
     summary = check_many(args.scene, args.out or "check-out", check_flags=check_flags,

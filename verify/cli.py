@@ -89,7 +89,8 @@ def _fit(args, scene):
         true_pose = truth.totem_pose
     from inverse.fit import FitSettings
 
-    settings = FitSettings(pose_from=getattr(args, "pose_from", "both"))
+    settings = FitSettings(pose_from=getattr(args, "pose_from", "both"),
+                           resting=getattr(args, "resting", False))
     result = fit_scene(scene, fixed_pose=getattr(args, "fixed_pose", False),
                        true_pose=true_pose, progress=_progress(args), settings=settings)
     fit_dir = _out_dir(args) / "fit"
@@ -259,6 +260,9 @@ def _fit_arguments(v, many: bool = False) -> None:
                         "weighed by what each is worth (default), or, as an override, "
                         "from the rims' strongest edges near each mask alone, or from the "
                         "masks' own outlines alone")
+    v.add_argument("--resting", action="store_true",
+                   help="the totems rest on one surface (a table, the floor): the plane "
+                        "their centres and radii fix caps the rebuilt view")
 
 
 def build_parser() -> argparse.ArgumentParser:
