@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from inverse import view
+from inverse import exact_gather, view
 from inverse.batches import DeviceRays, photo_terms, ray_batches
 from inverse.fit_files import FitResult, fit_timings, scene_fingerprint
 from inverse.grid import FrustumFrame, frame_for_scene, resample, stage_res, stage_samples
@@ -370,12 +370,11 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
 
 
 def _backend_step(loss, opt, params) -> None:
-    """Back-propagate ``loss``, take one Adam step and push it into the scene; the
-    backward pass on one thread, so its scatter-adds sum in one order and two fits of one
-    photo agree to the last bit (:func:`scenes.backend.one_thread`)."""
-    dr = backend.modules()[0]
+    """Back-propagate ``loss`` (the grids' gradients summed in fixed point, the same
+    on any number of threads: :func:`inverse.exact_gather.backward`), take one Adam
+    step and push it into the scene; on one thread, the faster beside other work."""
     with backend.one_thread():
-        dr.backward(loss)
+        exact_gather.backward(loss)
         opt.step()
     params.update(opt)
 

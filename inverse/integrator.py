@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from inverse.exact_gather import grid_at
 from inverse.grid import FrustumFrame
 from inverse.sphere import intersect, totem_rays
 from scenes import backend
@@ -161,33 +162,11 @@ def density_at(density: mi.Texture3f, p) -> mi.Float:
     """The raw density at unit grid points ``p`` (mi.Point3f): trilinear between cell
     centres, clamped at the edges, as ``mi.Texture3f.eval`` (equal to float rounding).
 
-    Eight gathers from the texture's tensor whose adjoint is a plain atomic add
-    (``dr.ReduceMode.Direct``): the texture's own adjoint, an expanded scatter, took
-    twice as long on the backward pass's one thread (docs/decisions.md, "fit: the
-    optimisation in about half the time").
+    Eight gathers whose adjoint adds in fixed point (:func:`inverse.exact_gather.grid_at`),
+    so a fit's gradient is the same on two threads as on one (docs/decisions.md, "fit:
+    the backward pass on two threads, in fixed point").
     """
-    dr, mi = backend.modules()
-    t = density.tensor()
-    D, H, W = t.shape[:3]
-    x = t.array
-    f = (p.x * W - 0.5, p.y * H - 0.5, p.z * D - 0.5)
-    lo = [dr.floor(a) for a in f]
-    w = [a - b for a, b in zip(f, lo)]                       # weights of the upper cells
-    i0, i1 = [], []
-    for b, n in zip(lo, (W, H, D)):
-        b = mi.Int32(b)
-        i0.append(mi.UInt32(dr.clip(b, 0, n - 1)))
-        i1.append(mi.UInt32(dr.clip(b + 1, 0, n - 1)))
-
-    def at(ix, iy, iz):
-        return dr.gather(mi.Float, x, (iz * H + iy) * W + ix, mode=dr.ReduceMode.Direct)
-
-    planes = []
-    for iz in (i0[2], i1[2]):
-        rows = [dr.lerp(at(i0[0], iy, iz), at(i1[0], iy, iz), w[0])
-                for iy in (i0[1], i1[1])]
-        planes.append(dr.lerp(rows[0], rows[1], w[1]))
-    return dr.lerp(planes[0], planes[1], w[2])
+    return grid_at(density, p)[0]
 
 
 def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
@@ -223,8 +202,7 @@ def march(density: mi.Texture3f, colour: mi.Texture3f, g0, g1, n: int, *,
     delta = dr.norm(seg) / n
     sigma = softplus(density_at(density, p))
     tau = sigma * delta
-    c = mi.Color3f(colour.eval(mi.Point2f(p.x, p.y)) if isinstance(colour, mi.Texture2f)
-                   else colour.eval(p))
+    c = mi.Color3f(*grid_at(colour, p))
     dr.eval(tau, c, m)        # one kernel for the lookups, reused by every reduction
     T = dr.exp(-dr.block_prefix_sum(tau, n, exclusive=True))
     alpha = dr.select(k == n - 1, 1.0, 1.0 - dr.exp(-tau))   # opaque backdrop

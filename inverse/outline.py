@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from inverse import pose
+from inverse.exact_gather import gather
 from scenes import backend
 
 if TYPE_CHECKING:                    # annotations only: Dr.Jit loads at the first use
@@ -78,7 +79,12 @@ def outline_residuals(centers, radius, rays, ray_totem) -> mi.Float:
     R = dr.gather(mi.Float, R_all, idx, mode=dr.ReduceMode.Direct) \
         if dr.width(R_all) > 1 else R_all
 
-    P = dr.gather(mi.Vector3f, C, idx, mode=dr.ReduceMode.Direct)
+    # Per ray its totem's centre; the adjoint summed in fixed point, the same on any
+    # number of threads (inverse.exact_gather).
+    if isinstance(C, mi.Vector3f):
+        P = mi.Vector3f(*[gather(C[a], [idx])[0] for a in range(3)])
+    else:
+        P = mi.Vector3f(*gather(C, [idx], channels=3))
     dist = dr.norm(P)
     theta = dr.atan2(dr.norm(dr.cross(d, P)), dr.dot(d, P))   # angle(d_k, P_j), stable
     alpha = dr.asin(R / dist)                                   # tangent cone half-angle
