@@ -156,3 +156,32 @@ def test_every_help_shows_an_example_and_the_exit_codes(capsys):
 def test_help_is_printed_and_exits_0():
     proc = totems("check", "--help")
     assert proc.returncode == 0 and "exit codes:" in proc.stdout, proc.stderr
+
+
+def test_resting_reaches_the_fit_and_every_photo_of_a_check(monkeypatch, tmp_path):
+    """``--resting`` sets ``FitSettings.resting`` for fit (and check, which fits alike),
+    and a check of several photos passes it to each; without it the fit is not told."""
+    import inverse.fit
+    from verify import checks, cli
+
+    seen = []
+
+    def fake_fit(scene, *, settings, **kwargs):
+        seen.append(settings.resting)
+        raise KeyboardInterrupt                      # stop before anything is written
+
+    monkeypatch.setattr(inverse.fit, "fit_scene", fake_fit)
+    scene = tiny_scene(tmp_path / "s")
+    assert cli.main(["fit", str(scene), "--resting", "--quiet"]) == 130
+    assert cli.main(["fit", str(scene), "--quiet"]) == 130
+    assert seen == [True, False]
+
+    flags = {}
+    monkeypatch.setattr(checks, "check_many",
+                        lambda scenes, out, **kw: flags.update(kw) or {})
+    args = cli.build_parser().parse_args(["check", "a", "b", "--resting", "--quiet"])
+    checks.from_args(args)
+    assert "--resting" in flags["check_flags"]
+    args = cli.build_parser().parse_args(["check", "a", "b", "--quiet"])
+    checks.from_args(args)
+    assert "--resting" not in flags["check_flags"]
