@@ -139,11 +139,13 @@ def single_thread_blas() -> None:
 def one_thread():
     """Run the block's Dr.Jit kernels on the calling thread alone (LLVM backend).
 
-    The reverse of a gather (a texture lookup, a neighbour in a regulariser) is a float
-    scatter-add; across threads its additions come in the order the threads happen to
-    run, so a gradient's last bits, and a fit's result, change from run to run. On one
-    thread the order is fixed. Queued kernels are finished before the pool changes size
-    (resizing it under a running kernel crashes the process). On CUDA nothing changes.
+    A float scatter-add (the reverse of a plain gather or texture lookup) adds in the
+    order the threads happen to run, so its last bits change from run to run; on one
+    thread the order is fixed. The fit's backward pass runs so, the faster beside other
+    work (its grids' sums are in fixed point, exact on any number of threads:
+    :mod:`inverse.exact_gather`). Queued kernels are finished before the pool changes
+    size (resizing it under a running kernel crashes the process). On CUDA nothing
+    changes.
     """
     dr = modules()[0]
     n = dr.thread_count()
