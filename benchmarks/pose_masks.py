@@ -66,18 +66,14 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
                 evidence.append(pose_combined.totem_evidence(m, R[j], K, grad, j=j))
             except BadInput:
                 evidence.append(None)
-        shares = pose_combined.shared_shares(evidence, [
-            None if e is None else
-            pose_combined.edge_share(e.x_near, e.S_near, e.width, e.x_rim)
-            for e in evidence])
+        weighed = pose_combined.weigh_photo(evidence, R, K)
         rows = []
-        for j, (ev, p) in enumerate(zip(evidence, shares)):
+        for j, (ev, c) in enumerate(zip(evidence, weighed)):
             if ev is None:
                 rows.append((np.nan,) * 5)
                 continue
             P_true = truth.totem_pose[j]
             dist = np.linalg.norm(P_true)
-            c = pose_combined.weigh(ev, R[j], K, p=p)
             rows.append((100 * np.linalg.norm(ev.mask_center - P_true) / dist,
                          100 * np.linalg.norm(ev.rim_center - P_true) / dist,
                          100 * np.linalg.norm(c.center - P_true) / dist,

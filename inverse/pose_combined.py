@@ -37,13 +37,15 @@ edge is the silhouette is never certain where two lie apart); plus the mask outl
 own, mapped to the centre by the Jacobian of ``x -> P``: one sd along the line of sight
 and across it.
 
-The photo's totems share evidence (:func:`shared_shares`): where a totem's nearest edge
-and its rim's strongest edge disagree on the size, the one nearer the other totems' rim
-size is taken (their masks were drawn alike, and the band wins the rim on few totems).
+The photo's totems share evidence (:func:`weigh_photo`, :mod:`inverse.pose_shared`): their
+masks were drawn alike, and the band or a shadow takes the edge on few totems at once, so
+the others say which of a totem's edges is the silhouette and, for masks drawn by a tool,
+how far off its size is.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
-weighed", "pose: the mask's share weighed softly, and a sd that covers" and "pose: the
-edge's bias by the outline's radius, and the photo's totems pooled".
+weighed", "pose: the mask's share weighed softly, and a sd that covers", "pose: the
+edge's bias by the outline's radius, and the photo's totems pooled" and "pose: clean masks
+drawn alike share their size".
 """
 
 from __future__ import annotations
@@ -52,7 +54,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inverse import pose, rim
+from inverse import pose, pose_shared, rim
+from inverse.pose_shared import AMBIGUITY, SHARED_SD_PX, shared_shares
 from scenes import camera, silhouette
 
 __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
@@ -62,8 +65,8 @@ __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
            "OUTER_PX", "OUTER_SOFT_PX", "AMBIGUITY", "SHARED_SD_PX", "move_of",
            "edge_share", "POSE_FROM", "uncertainty_record", "initial_centres",
            "CombinedPose", "edge_offsets", "edge_bias_px", "fit_offsets", "photo_move",
-           "Evidence", "totem_evidence", "weigh", "shared_shares", "combine_centre",
-           "combined_poses"]
+           "Evidence", "totem_evidence", "weigh", "shared_shares", "weigh_photo",
+           "combine_centre", "combined_poses"]
 
 ARCS = 12              # arcs the outline is cut into (each one edge offset)
 WINDOW_PX = 3.0        # how far along each normal the nearest edge is looked for (pixels)
@@ -85,8 +88,6 @@ TIGHT_WIDTHS = 0.2     # the arcs' edges agree on the outline's size to this (1 
 TIGHT_SOFT_WIDTHS = 0.1  # units of the edge's width), the share falling every this much
 CONFIRM_SD = 2.0       # the photo moves the mask's outline only beyond this many sd,
 CONFIRM_SOFT_SD = 0.25  # ... and the mask's share falls by exp(-1/2) every this much
-AMBIGUITY = 0.1        # the mixture's variance counts p as if within this of 0 and 1
-SHARED_SD_PX = 0.3     # the least spread of a mask's size error among a photo's totems
 
 
 @dataclass
@@ -294,10 +295,12 @@ def totem_evidence(mask, R: float, K, grad, *, j: int = 0) -> Evidence:
                     rim_center=P_r)
 
 
-def weigh(ev: Evidence, R: float, K, *, p: float | None = None) -> CombinedPose:
+def weigh(ev: Evidence, R: float, K, *, p: float | None = None,
+          prior=None) -> CombinedPose:
     """:class:`CombinedPose` from one totem's :class:`Evidence`: the on-edge and the
     off-edge moves mixed by the mask's share ``p`` (default :func:`edge_share` of the
-    evidence alone)."""
+    evidence alone); the size then pulled to the photo's other totems' ``prior``
+    (:func:`inverse.pose_shared.pooled`; default none)."""
     K = np.asarray(K, np.float64)
     P_m, extra2 = ev.mask_center, ev.extra2
     x_n, S_n, x_f, S_f = ev.x_near, ev.S_near, ev.x_far, ev.S_far
@@ -310,6 +313,8 @@ def weigh(ev: Evidence, R: float, K, *, p: float | None = None) -> CombinedPose:
     post = p * v1 + (1 - p) * v0 + q * (1 - q) * (x1 - x0) ** 2
     w = p * w1 + (1 - p) * w0
     x_p, S = (x_n, S_n) if p >= 0.5 else (x_f, S_f)
+    if prior is not None:
+        x[2], post[2] = pose_shared.pooled(x[2], post[2], S[2, 2], prior)
     J = _jacobian(P_m, R, K, x)
     C = J @ np.diag(post) @ J.T                               # centre covariance, m^2
     P = rim._moved(P_m, R, K, x)
@@ -321,36 +326,22 @@ def weigh(ev: Evidence, R: float, K, *, p: float | None = None) -> CombinedPose:
                         shape_rms_px=ev.shape_rms_px, edge_share=p)
 
 
-def shared_shares(evidence, shares) -> list:
-    """Each totem's share ``p`` weighed again by what the photo's other totems say of
-    their masks' size error: where the edge nearest the mask (``x_near``) and the rim's
-    strongest edge (``x_rim``) disagree, the one nearer the others' rim size (their
-    median, spread by their median absolute deviation, at least :data:`SHARED_SD_PX`)
-    wins: ``p`` moves as a share kept within :data:`AMBIGUITY` of 0 and 1 would (a
-    likelihood ratio of 1 leaves it as it is). Masks drawn in
-    one photo share how they were drawn (pixel-exact, a brush too wide, a polygon's
-    chords), and the rim's edge is the band's on few totems at once. ``evidence``: a
-    list of :class:`Evidence` or None (an unusable mask), ``shares`` the same length;
-    returns the new shares (None where the evidence is)."""
-    g = np.array([e.x_rim[2] if e is not None else np.nan for e in evidence])
-    out = []
-    for j, (e, p) in enumerate(zip(evidence, shares)):
-        others = np.delete(g, j)
-        others = others[np.isfinite(others)]
-        if e is None or len(others) < 2:           # no photo to share with
-            out.append(p)
-            continue
-        mu = np.median(others)
-        tau2 = max(SHARED_SD_PX ** 2, (1.4826 * np.median(np.abs(others - mu))) ** 2)
-        log_like = []                  # the near edge's, then the rim's (refined)
-        for x, S in ((e.x_near, e.S_near), (e.x_far, e.S_far)):
-            v = tau2 + (S[2, 2] if np.isfinite(S[2, 2]) else rim.MASK_SIGMA_PX ** 2)
-            log_like.append(-0.5 * (x[2] - mu) ** 2 / v - 0.5 * np.log(v))
-        q = min(max(p, AMBIGUITY), 1.0 - AMBIGUITY)
-        odds = np.log(q / (1 - q)) + log_like[0] - log_like[1]
-        moved = 1.0 / (1.0 + np.exp(-np.clip(odds, -50, 50))) - q
-        out.append(float(min(max(p + moved, 0.0), 1.0)))
-    return out
+def weigh_photo(evidence, R, K) -> list:
+    """Every totem's :class:`CombinedPose` (None where its evidence is None) from one
+    photo's :class:`Evidence` list, ``R`` (n,) metres: each share weighed with the
+    photo's others (:func:`inverse.pose_shared.shared_shares`), then each clean mask's
+    size pulled to the others' where its edge lies far from theirs
+    (:func:`inverse.pose_shared.shared_sizes`)."""
+    p = shared_shares(evidence, [None if e is None else
+                                 edge_share(e.x_near, e.S_near, e.width, e.x_rim)
+                                 for e in evidence])
+    first = [None if e is None else weigh(e, R[j], K, p=p[j])
+             for j, e in enumerate(evidence)]
+    sizes = [np.nan if c is None else move_of(c.mask_center, c.center, R[j], K)[2]
+             for j, c in enumerate(first)]
+    priors = pose_shared.shared_sizes(evidence, sizes)
+    return [c if c is None or prior is None else weigh(e, R[j], K, p=p[j], prior=prior)
+            for j, (e, c, prior) in enumerate(zip(evidence, first, priors))]
 
 
 def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
@@ -360,8 +351,8 @@ def combine_centre(mask, R: float, K, grad, *, j: int = 0) -> CombinedPose:
 
 
 def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
-    """Every totem's :class:`CombinedPose`, its share weighed with the photo's others
-    (:func:`shared_shares`): ``image`` (H, W, 3) sRGB [0, 1], ``masks``
+    """Every totem's :class:`CombinedPose`, weighed with the photo's others
+    (:func:`weigh_photo`): ``image`` (H, W, 3) sRGB [0, 1], ``masks``
     (n, H, W) bool, ``K`` (3, 3), ``radius`` (n,) or one, metres. BadInput for an
     unusable mask or key (:func:`inverse.pose.initial_pose` checks them first)."""
     masks = np.asarray(masks, bool)
@@ -373,8 +364,7 @@ def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
                                 rim.SIGMA_PX)
     ev = [totem_evidence(m, float(r), K, grad, j=j) for j, (m, r) in
           enumerate(zip(masks, R))]
-    p = shared_shares(ev, [edge_share(e.x_near, e.S_near, e.width, e.x_rim) for e in ev])
-    return [weigh(e, float(r), K, p=pj) for e, r, pj in zip(ev, R, p)]
+    return weigh_photo(ev, R, K)
 
 
 POSE_FROM = ("both", "photo", "mask")

@@ -1,0 +1,71 @@
+"""inverse/pose_shared: what the totems of one photo share. Masks drawn alike by a tool
+err alike, so a totem whose edges disagree with the others' is read against theirs; a
+polygon's or a stroke's error is its own."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from inverse import pose_combined, pose_shared
+from scenes import camera
+
+K = camera.intrinsics(320, 240, 60.0)
+P0, R0 = np.array([0.1, -0.05, 1.1]), 0.1
+
+
+def _evidence(g_near, g_rim, *, shape_rms=0.2, sd=0.25):
+    """A totem's evidence: its nearest edge puts the silhouette ``g_near`` px outside
+    the mask's outline, the rim's strongest edge ``g_rim`` px, each measured to ``sd``
+    px; ``shape_rms`` the mask outline's rms from a conic (0.2: a pixel-exact mask)."""
+    S = np.diag([0.5 ** 2, 0.5 ** 2, sd ** 2])
+    return pose_combined.Evidence(
+        mask_center=P0, shape_rms_px=shape_rms, extra2=0.0, width=1.2,
+        x_near=np.array([0.0, 0.0, g_near]), S_near=S,
+        x_rim=np.array([0.0, 0.0, g_rim]), x_far=np.array([0.0, 0.0, g_rim]), S_far=S,
+        rim_center=P0)
+
+
+def _size(c):
+    return pose_combined.move_of(c.mask_center, c.center, R0, K)[2]
+
+
+def test_a_clean_mask_whose_edges_lie_off_the_others_takes_their_size():
+    """Exact masks on their edges, and one whose nearest and strongest edges agree, to
+    0.25 px, 1 px inside it (the band): its size is the others' (within 0.2 px), less
+    sure than theirs. Masks drawn as polygons keep their own sizes, and so do clean
+    masks whose others disagree among themselves."""
+    for others, rms, pooled in (((0.0, 0.05, -0.05), 0.2, True),
+                                ((0.0, 0.05, -0.05), 0.8, False),
+                                ((0.0, 0.9, -0.8), 0.2, False)):
+        ev = [_evidence(-1.0, -1.0, shape_rms=rms)] + \
+            [_evidence(g, g, shape_rms=rms) for g in others]
+        poses = pose_combined.weigh_photo(ev, np.full(4, R0), K)
+        if pooled:
+            assert abs(_size(poses[0])) < 0.2, _size(poses[0])
+            assert poses[0].sd_along > 1.5 * max(c.sd_along for c in poses[1:])
+        else:
+            assert abs(_size(poses[0]) + 1.0) < 0.1, _size(poses[0])
+
+
+def test_the_pull_grows_smoothly_with_the_gap():
+    """Within the knee a totem keeps its size; beyond it the pull grows without a jump
+    and ends at the others' size."""
+    prior = (0.0, pose_shared.TIGHT_SD_PX ** 2)
+    gaps = np.linspace(0.0, 2.0, 201)
+    g = np.array([pose_shared.pooled(x, 0.05, 0.25 ** 2, prior)[0] for x in gaps])
+    knee = pose_shared.POOL_KNEE_SD * np.sqrt(0.25 ** 2 + prior[1])
+    np.testing.assert_allclose(g[gaps <= knee], gaps[gaps <= knee])
+    assert abs(g[-1]) < 0.01 and np.abs(np.diff(g)).max() < 0.05
+
+
+def test_masks_sure_of_their_edges_outvote_a_rim_pulled_aside():
+    """Exact masks whose nearest edge is also their rim's strongest (share 1) say how
+    the photo's masks were drawn: a mask whose rim's strongest edge lies 0.8 px outside
+    (background beyond a weak silhouette) keeps its nearest edge. Masks whose nearest
+    edge is not their rim's (a halo at a grown mask's outline, the rim 1.5 px inside)
+    are not sure, and the others' rims decide, as before."""
+    exact = [_evidence(0.0, 0.8)] + [_evidence(g, g + 0.2) for g in (0.0, 0.05, -0.05)]
+    assert pose_shared.shared_shares(exact, [0.3, 1.0, 1.0, 1.0])[0] > 0.9
+    assert pose_shared.shared_shares(exact, [0.3, 0.5, 0.5, 0.5])[0] < 0.8
+    grown = [_evidence(0.0, -1.5)] + [_evidence(g, -1.5) for g in (0.0, -0.05, 0.05)]
+    assert pose_shared.shared_shares(grown, [0.7, 1.0, 1.0, 1.0])[0] < 0.1
