@@ -15,7 +15,7 @@ from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_
 FIELDS = {"verdict", "score", "threshold", "protected_fraction", "totems", "metrics",
           "timing_s", "versions", "scores", "drivers", "key_fingerprint", "region",
           "statistic", "p_value", "line_p_value", "skipped", "working_scale",
-          "judged_fraction", "evidence"}
+          "judged_fraction", "evidence", "tone"}
 
 
 def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():
@@ -117,3 +117,19 @@ def test_fit_from_another_scene_is_bad_input():
     three = SimpleNamespace(**{**vars(make_fit(photo)), "centers": np.zeros((3, 3))})
     with pytest.raises(BadInput, match="refit"):
         report.verify_scene(make_scene(photo), three)
+
+
+def test_a_view_off_by_an_exposure_is_judged_as_the_photos_own():
+    """A view whose linear light is 0.6-0.8 of the photo's (a camera's other exposure
+    and white balance) is brought back by its gains and judged as the exact view is."""
+    from scenes.colour import linear_to_srgb, srgb_to_linear
+
+    photo = texture()
+    dark = linear_to_srgb(srgb_to_linear(photo) * np.array([0.6, 0.7, 0.8]))
+    scene = make_scene(with_square(photo), box_mask(SQUARE))
+    exact = report.verify_scene(scene, make_fit(photo))
+    off = report.verify_scene(scene, make_fit(dark))
+    assert off.tone["gain"] == pytest.approx([1 / 0.6, 1 / 0.7, 1 / 0.8], rel=0.02)
+    assert exact.tone["gain"] == pytest.approx([1, 1, 1], abs=0.03)    # the blur only
+    assert off.verdict == exact.verdict == "inconsistent"
+    assert off.score == pytest.approx(exact.score, rel=0.05)

@@ -30,7 +30,8 @@ class Report:
     (the protected region where the evidence map resolves the surface; written as
     judged_mask.png) and ``judged_fraction`` its share of the non-totem pixels (in
     report.json); ``evidence`` the :class:`verify.evidence.Evidence` map (None for a fit
-    without totem rays).
+    without totem rays); ``tone`` the gains that brought ``recon`` (the view compared)
+    to the photo's exposure (:func:`verify.tone.match_gain`).
     """
 
     verdict: str
@@ -58,6 +59,7 @@ class Report:
     judged: np.ndarray | None = None
     judged_fraction: float | None = None
     evidence: object = None
+    tone: dict | None = None
 
     @property
     def drivers(self) -> list:
@@ -69,7 +71,8 @@ class Report:
         ``statistic``, ``p_value`` and ``line_p_value`` (the calibration's,
         :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
         protected region's shape), ``working_scale`` (:mod:`scenes.working`),
-        ``judged_fraction`` and ``evidence`` (:mod:`verify.evidence`) and a
+        ``judged_fraction`` and ``evidence`` (:mod:`verify.evidence`), ``tone``
+        (:mod:`verify.tone`) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -97,6 +100,9 @@ class Report:
                 "min_parallax": float(evidence.MIN_PARALLAX),
                 "resolved_fraction": _num(float(self.evidence.resolved.mean())),
                 "min_judged": float(verdict_mod.MIN_JUDGED)},
+            "tone": None if self.tone is None else {
+                "gain": [_num(g) for g in self.tone["gain"]],
+                "pixels": int(self.tone["pixels"])},
         }
 
 

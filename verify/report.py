@@ -19,7 +19,7 @@ from scenes import folder
 from scenes.camera import sphere_silhouette
 from scenes.errors import BadInput
 from verify import absence, corroborate, evidence, html_report, patches, region
-from verify import resolution
+from verify import resolution, tone
 from verify import verdict as verdict_mod
 from verify.findings import Report
 
@@ -85,13 +85,17 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         rays, FrustumFrame.from_dict(fit.grid))
     ev = None if rays is None else evidence.evidence_map(
         rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices)
-    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices)
-    heat = patches.heatmaps(errors, grid, valid=~totem_mask)
-    keep = patches.patch_fraction(seen, grid) > 0
-
     # each metric judges the protected pixels where its evidence holds (sRGB [0, 1])
     # (only where a patch can judge them: the grid stops at the highest totem)
     judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, grid)
+    # the view at the photo's exposure and white balance, read off the judged pixels
+    fitted = recon
+    sigma = resolution.photo_sigma(resolution.ray_spacing(fit.totem_points, scene.K,
+                                                          (W, H)))
+    recon, tone_found = tone.match_gain(patches.blur_varying(image, sigma), recon, judged)
+    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices)
+    heat = patches.heatmaps(errors, grid, valid=~totem_mask)
+    keep = patches.patch_fraction(seen, grid) > 0
     # (ABSENT judges the points in front of the surface its three totems resolve)
     inside = patches.patch_scores({m: e for m, e in errors.items() if m != "ABSENT"},
                                   grid, judged)
@@ -115,7 +119,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     if truth is not None:
         clean = np.asarray(truth.clean, dtype=np.float64)
         if clean.shape == image.shape and seen.any():
-            metrics["recon_L1"] = float(np.abs(recon - clean).mean(axis=2)[seen].mean())
+            metrics["recon_L1"] = float(np.abs(fitted - clean).mean(axis=2)[seen].mean())
         true_pose = np.asarray(truth.totem_pose, dtype=np.float64)
         if true_pose.shape == np.shape(fit.centers):
             metrics["pose_L1"] = float(np.abs(np.asarray(fit.centers, float) - true_pose)
@@ -136,7 +140,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
-        judged=judged, judged_fraction=judged_fraction, evidence=ev)
+        judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found)
 
 
 def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices) -> dict:
