@@ -372,10 +372,9 @@ def _optimise(itg, frame, pixels: TotemPixels, refl, initial, radius, ior, setti
 def _backend_step(loss, opt, params) -> None:
     """Back-propagate ``loss`` (the grids' gradients summed in fixed point, the same
     on any number of threads: :func:`inverse.exact_gather.backward`), take one Adam
-    step and push it into the scene; on one thread, the faster beside other work."""
-    with backend.one_thread():
-        exact_gather.backward(loss)
-        opt.step()
+    step and push it into the scene, on every thread the backend has."""
+    exact_gather.backward(loss)
+    opt.step()
     params.update(opt)
 
 

@@ -141,8 +141,8 @@ def one_thread():
 
     A float scatter-add (the reverse of a plain gather or texture lookup) adds in the
     order the threads happen to run, so its last bits change from run to run; on one
-    thread the order is fixed. The fit's backward pass runs so, the faster beside other
-    work (its grids' sums are in fixed point, exact on any number of threads:
+    thread the order is fixed (the fit's own backward pass needs no such care: its
+    grids' sums are in fixed point, exact on any number of threads,
     :mod:`inverse.exact_gather`). Queued kernels are finished before the pool changes
     size (resizing it under a running kernel crashes the process). On CUDA nothing
     changes.

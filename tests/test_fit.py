@@ -428,21 +428,19 @@ def test_a_batched_fit_recovers_the_pose_and_the_view_as_the_full_batch_one(smal
 
 
 @pytest.mark.slow
-def test_two_fits_of_one_photo_agree_to_the_last_bit(small_scene, monkeypatch):
+def test_two_fits_of_one_photo_agree_to_the_last_bit(small_scene):
     """Same photo, same answer: the batches are seeded and the grids' gradients summed in
     fixed point, so the grid, the centres, the losses and the view of two fits whose
     backward pass runs on two threads, and of a third on one, are equal, not merely
     close."""
-    import contextlib
-
     from inverse import fit
     from scenes import backend
 
     scene, _, _, st = _perturbed(small_scene, steps=(10, 20))
     st = dataclasses.replace(st, batch_rays=512)
-    c = fit.fit_scene(scene, settings=st)                  # the backward on one thread
+    with backend.one_thread():                             # every kernel on one thread
+        c = fit.fit_scene(scene, settings=st)
     assert backend.modules()[0].thread_count() >= 2
-    monkeypatch.setattr(backend, "one_thread", contextlib.nullcontext)
     a, b = (fit.fit_scene(scene, settings=st) for _ in range(2))
     for r in (b, c):
         assert a.history["loss"] == r.history["loss"]
