@@ -14,10 +14,15 @@ import numpy as np
 
 from scenes import folder, presets, render
 from scenes.errors import BadInput
+from scenes.preset_parts import sphere_outline
 
-__all__ = ["make_scene"]
+__all__ = ["make_scene", "hidden_totems"]
 
 CAMERA_STREAM = 1          # the camera noise's generator: (sampler seed, this)
+MIN_VISIBLE = 0.5
+"""A totem the camera sees less of than this fraction of its disc is hidden."""
+MIN_DRAWN = 3
+"""Hidden totems are left out of a drawn key while at least this many remain."""
 
 
 def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
@@ -59,6 +64,8 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
         raise BadInput(f"output folder exists and is not empty: {out}")
     desc = presets.describe(preset, seed, size=size, n_totems=n_totems, radius=radius,
                             ior=ior, placement=placement)
+    if n_totems is None:                    # a drawn count: hidden totems are left out
+        desc = _without_hidden(desc)
     bar = _bar(progress, 3)
     timings = {}
     t0 = time.perf_counter()
@@ -98,6 +105,31 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     radius, ior = _key(desc["totems"], order)
     return folder.write_scene(out, image=image, K=np.asarray(desc["K"], float),
                               masks=masks, radius=radius, ior=ior, truth=truth)
+
+
+def hidden_totems(desc: dict, ids: np.ndarray, *, min_visible: float = MIN_VISIBLE) -> list:
+    """The totems of ``desc`` of which the camera sees less than ``min_visible`` of the
+    disc they would cover alone: ``ids`` (H, W) :func:`scenes.render.shape_ids` against
+    the area of each sphere's outline (pixels)."""
+    K = np.asarray(desc["K"], float)
+    hidden = []
+    for j, t in enumerate(desc["totems"]):
+        uv = sphere_outline(K, t["center"], t["radius"])
+        area = 0.5 * abs(np.dot(uv[:, 0], np.roll(uv[:, 1], 1))
+                         - np.dot(uv[:, 1], np.roll(uv[:, 0], 1)))
+        if np.count_nonzero(ids == render.totem_id(j)) < min_visible * area:
+            hidden.append(j)
+    return hidden
+
+
+def _without_hidden(desc: dict) -> dict:
+    """``desc`` without the totems an object hides (:func:`hidden_totems`), while at
+    least ``MIN_DRAWN`` remain; the description records them (``hidden_totems``)."""
+    hidden = hidden_totems(desc, render.shape_ids(desc))
+    if not hidden or len(desc["totems"]) - len(hidden) < MIN_DRAWN:
+        return desc
+    kept = [t for j, t in enumerate(desc["totems"]) if j not in hidden]
+    return dict(desc, totems=kept, hidden_totems=[desc["totems"][j] for j in hidden])
 
 
 def _key(totems: list, order) -> tuple:

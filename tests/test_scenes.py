@@ -234,3 +234,28 @@ def test_two_area_lights_same_seed_same_noise():
     first = render.render(desc, spp=1, seed=3)
     for _ in range(4):
         assert np.array_equal(render.render(desc, spp=1, seed=3), first)
+
+
+def test_a_totem_an_object_hides_is_found_and_left_out_of_a_drawn_key(tmp_path):
+    """Outdoor seed 12, resting: a near boulder hides two of the five drawn totems
+    (one wholly, one mostly); they are found by their visible share of the disc, the
+    scene is made with the three the camera sees, and scene.json says which went."""
+    import json
+
+    from scenes.make import hidden_totems, make_scene
+
+    desc = presets.describe("outdoor", 12, size=(320, 240), placement="resting")
+    ids = render.shape_ids(desc)
+    assert hidden_totems(desc, ids) == [3, 4]
+    box = presets.describe("box", 1, size=(320, 240))
+    box_ids = render.shape_ids(box)
+    assert hidden_totems(box, box_ids) == []
+    box_ids[box_ids == render.totem_id(2)] = 0             # the floor over totem 2
+    assert hidden_totems(box, box_ids) == [2]
+
+    out = make_scene(tmp_path / "s", preset="outdoor", seed=12, size=(320, 240), spp=1,
+                     placement="resting")
+    scene = folder.read_scene(out)
+    record = json.loads((out / "truth" / "scene.json").read_text())
+    assert scene.n_totems == 3 and len(record["hidden_totems"]) == 2
+    assert [t["center"] for t in record["totems"]] == [t["center"] for t in desc["totems"][:3]]
