@@ -140,7 +140,8 @@ def test_a_failing_photo_is_recorded_and_the_others_finish(batch_run):
     assert not (out / "runs" / "env-1-color" / "fit").exists()     # it fitted nothing
     for name in ("env-1", "env-1-color"):
         p = photos[name]
-        assert p["status"] == "ok" and p["verdict"] in ("consistent", "inconsistent")
+        assert p["status"] == "ok" and p["verdict"] in ("consistent", "inconsistent",
+                                                        "unverifiable")
         assert (out / p["report"]).is_file()
         if p["html"]:
             assert f'href="{p["html"]}"' in (out / "index.html").read_text()
@@ -163,7 +164,7 @@ def test_the_batch_gives_each_photo_the_verdict_of_the_old_path(batch_run, tmp_p
         proc = subprocess.run([sys.executable, "-m", "verify.cli", *map(str, verb),
                                str(scene), "--out", str(tmp_path), "--json", "--quiet"],
                               capture_output=True, text=True, env=env, timeout=300)
-        assert proc.returncode in (0, 1), proc.stderr
+        assert proc.returncode in (0, 1, 4), proc.stderr    # 64x48: maybe unverifiable
         old[scene.name] = json.loads(proc.stdout)
     index = json.loads((batch_run["out"] / "index.json").read_text())
     for batched in index["photos"][:2]:
