@@ -25,23 +25,19 @@ block sum: no scatter-add contention in the backward pass); totem centres enter 
 ``dr.select`` chain over the few totems, whose adjoint is a horizontal sum.
 
 Samples are evenly spaced in the grid's unit coordinates (inverse depth in ``r``),
-which is evenly spaced along the ray (the map is projective). ``delta`` is the
-segment's length in units of 1/100 of the grid's depth extent, so densities do not
-change meaning when the grid is refined.
+so along the ray (the map is projective); ``delta`` is the segment's length in 1/100
+of the grid's depth extent, so densities keep their meaning when the grid is refined.
 
 With ``mirror`` set, a totem pixel also sees the glass's front reflection of the scene
 itself, ``R_F C_r`` (:meth:`TotemGrid.mirrored`): ``C_r`` the grid's radiance along the
-camera ray mirrored at its entry point, where that ray runs forward through the grid; a
-sphere on a bright table shows the table in its lower half, over the dark wall it
-refracts there. Reflections the grid does not hold (behind the camera, above the view)
-are left to the fit's one ambient colour.
+camera ray mirrored at its entry point, where that ray runs forward through the grid;
+other reflections are left to the fit's one ambient colour.
 
 Parameters (``mi.traverse``): ``density`` (nr, nt, ns, 1) raw density before the
 softplus; ``colour`` (nr', nt', ns', 3) linear RGB; ``centers`` (3 n floats, metres,
-camera frame; x of every totem, then y, then z). Construction option (props):
-``n_samples`` (int, default 64): samples per ray. Totem rays that leave the grid through
-its top face are invalid (:func:`leaves_through_top`). The class is made at the first
-use (:func:`integrator_class`), since its Mitsuba base needs the variant chosen.
+camera frame; every x, then y, then z). Option: ``n_samples`` (default 64) per ray.
+Totem rays that leave through the grid's top face are invalid (:func:`leaves_through_top`).
+The class is made at the first use (:func:`integrator_class`): its base needs the variant.
 """
 
 from __future__ import annotations
