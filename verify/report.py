@@ -89,11 +89,12 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     # (only where a patch can judge them: the grid stops at the highest totem)
     judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, grid)
     # the view at the photo's exposure and white balance, read off the judged pixels
+    # (the photo compared at the evidence's resolution: verify.resolution)
     fitted = recon
-    sigma = resolution.photo_sigma(resolution.ray_spacing(fit.totem_points, scene.K,
-                                                          (W, H)))
-    recon, tone_found = tone.match_gain(patches.blur_varying(image, sigma), recon, judged)
-    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices)
+    spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
+    recon, tone_found = tone.match_gain(
+        patches.blur_varying(image, resolution.photo_sigma(spacing)), recon, judged)
+    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices, spacing)
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     keep = patches.patch_fraction(seen, grid) > 0
     # (ABSENT judges the points in front of the surface its three totems resolve)
@@ -143,13 +144,11 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found)
 
 
-def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices) -> dict:
+def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices, spacing) -> dict:
     """Every metric's per-pixel map (:mod:`verify.patches`), CORROB and ABSENT from the
     totem rays when the fit has them (CORROB from ``slices``,
-    :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB."""
-    H, W = image.shape[:2]
-    # the photo is compared at the evidence's resolution (verify.resolution)
-    spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
+    :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB; the photo
+    blurred to the rays' ``spacing`` (H, W) px (:mod:`verify.resolution`)."""
     hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
     hue_sigma = resolution.photo_sigma(spacing, hue)
     errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
