@@ -19,13 +19,15 @@ tampered, then recaptured, N at a time in separate processes (renders are
 deterministic per seed, so the order does not matter). --dry-run: what is left to
 make and how long it would take here (``SECONDS``). --cycles: also the set's scenes
 rendered by Blender's Cycles (``sets.CYCLES``; ``make cycles-env`` first), OUT/cycles-
-<kind>-s<seed>[-<edit>|-remove]/, by ``benchmarks/cycles/make_cycles_set.py``.
+<kind>-s<seed>[-<edit>|-remove]/, by ``benchmarks/cycles/make_cycles_set.py`` at 64
+samples, and their copies in the set's ``sets.CYCLES_CHANNELS`` (OUT/<that>+jpeg75/).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -191,6 +193,8 @@ def build(out: Path, photos, *, size, jobs: int = 1, spp=None) -> list[Path]:
 
 
 CYCLES_SECONDS = 240.0     # a Cycles scene with its removal at 640x480 here (150-363 s)
+CYCLES_SAMPLES = 64        # the samples the sets' Cycles scenes are rendered at (about 100 s here)
+CYCLES_NAME = re.compile(r"cycles-[a-z]+-s(\d+)(-[a-z]+)?")
 
 
 def cycles_command(out: Path, set_name: str, *, small: bool = False) -> list[str]:
@@ -200,16 +204,39 @@ def cycles_command(out: Path, set_name: str, *, small: bool = False) -> list[str
     count = min(2, len(seeds)) if small else len(seeds)
     return [str(out), "--seed", str(seeds.start), "--count", str(count),
             "--edits", ",".join(edits) or "none", *([] if remove else ["--no-remove"]),
-            *(["--small"] if small else [])]
+            *(["--small"] if small else ["--samples", str(CYCLES_SAMPLES)])]
+
+
+def recapture_cycles(out: Path, set_name: str) -> list[str]:
+    """Recapture every Cycles photo of the set's seeds found in ``out`` (untouched and
+    edited, ``cycles-<kind>-s<seed>[-<edit>]``) in the set's ``sets.CYCLES_CHANNELS``, as
+    ``<name>+<channel>`` (its noise seeded by the seed; one found is kept); log lines."""
+    seeds = sets.CYCLES[set_name][0]
+    lines = []
+    for src in sorted(out.glob("cycles-*")):
+        m = CYCLES_NAME.fullmatch(src.name)
+        if not (m and src.is_dir() and int(m.group(1)) in seeds):
+            continue
+        for channel in sets.CYCLES_CHANNELS.get(set_name, ()):
+            dst = out / f"{src.name}+{channel}"
+            if not dst.exists():
+                recapture(src, dst, channel, seed=int(m.group(1)))
+                lines.append(f"recaptured {dst.name}")
+    return lines
 
 
 def build_cycles(out: Path, set_name: str, *, small: bool) -> int:
-    """Run make_cycles_set.py for the set's Cycles scenes; its exit code."""
+    """Run make_cycles_set.py for the set's Cycles scenes, then recapture them
+    (``recapture_cycles``); the exit code."""
     import subprocess
 
     script = Path(__file__).with_name("cycles") / "make_cycles_set.py"
-    return subprocess.run([sys.executable, str(script),
+    code = subprocess.run([sys.executable, str(script),
                            *cycles_command(out, set_name, small=small)]).returncode
+    if code == 0:
+        for line in recapture_cycles(out, set_name):
+            print(line, flush=True)
+    return code
 
 
 def main(argv=None) -> int:

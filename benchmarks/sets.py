@@ -19,7 +19,8 @@ or ground (``RESTING``: box, outdoor, window), ``-<kind>`` when manipulated and
 ``+<channel>`` when recaptured (``totems recapture``); the pristine photos keep the
 standard set's names. Channels are :class:`scenes.channel.Channel` settings. Each set
 also holds scenes rendered by Blender's Cycles on seeds of its own (``CYCLES``;
-``make_set.py --cycles`` builds them, pristine, through ``benchmarks/cycles/``).
+``make_set.py --cycles`` builds them through ``benchmarks/cycles/``, and recaptures them
+in ``CYCLES_CHANNELS``).
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ from dataclasses import dataclass
 from scenes.presets import PRESETS
 from scenes.tamper import KINDS
 
-__all__ = ["CHANNELS", "SEEDS", "CYCLES", "RESERVED", "Recipe", "RECIPES", "Photo", "SETS",
-           "check_disjoint", "photos"]
+__all__ = ["CHANNELS", "SEEDS", "CYCLES", "CYCLES_CHANNELS", "RESERVED", "Recipe", "RECIPES",
+           "Photo", "SETS", "check_disjoint", "photos"]
 
 UNTOUCHED = "none"
 
@@ -60,6 +61,9 @@ CYCLES = {
     "calibration": (range(201, 209), (), False),
     "benchmark": (range(301, 306), ("color", "splice"), True),
 }
+# set -> the channels every one of its Cycles photos is also recaptured in (the benchmark
+# judges its edits pristine and at JPEG 75, as its Mitsuba recipes do)
+CYCLES_CHANNELS = {"benchmark": ("jpeg75",)}
 # seeds used before the sets existed, kept out of every set
 RESERVED = {"validation of the thresholds (README, 2026-12)":
             {"box": range(21, 26), "envmap": range(21, 26)}}

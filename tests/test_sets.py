@@ -94,9 +94,30 @@ def test_each_sets_cycles_scenes_are_its_own():
         assert argv[:5] == ["out", "--seed", str(seeds.start), "--count", str(len(seeds))]
         assert argv[argv.index("--edits") + 1] == (",".join(edits) or "none")
         assert ("--no-remove" in argv) is (not remove)
+        assert argv[argv.index("--samples") + 1] == str(make_set.CYCLES_SAMPLES) == "64"
     assert len(sets.CYCLES["benchmark"][0]) >= 5 and len(sets.CYCLES["calibration"][0]) >= 5
     small = make_set.cycles_command(Path("o"), "benchmark", small=True)
-    assert small[4] == "2" and small[-1] == "--small"
+    assert small[4] == "2" and small[-1] == "--small" and "--samples" not in small
+
+
+def test_cycles_photos_of_the_set_are_recaptured_in_its_channels(tmp_path, monkeypatch):
+    """The benchmark's Cycles photos (untouched and edited, its own seeds only) gain a
+    +jpeg75 copy seeded by their seed; one found is kept; calibration's gain none."""
+    calls = []
+    monkeypatch.setattr(make_set, "recapture",
+                        lambda src, dst, ch, *, seed: calls.append((src.name, dst.name, ch,
+                                                                    seed)))
+    for name in ("cycles-room-s301", "cycles-room-s301-color", "cycles-yard-s303-remove",
+                 "cycles-room-s301+jpeg75", "cycles-room-s201", "box-1",
+                 "cycles-yard-s304-splice+jpeg75", "cycles-yard-s304-splice"):
+        (tmp_path / name).mkdir()
+    lines = make_set.recapture_cycles(tmp_path, "benchmark")
+    assert sorted(calls) == [
+        ("cycles-room-s301-color", "cycles-room-s301-color+jpeg75", "jpeg75", 301),
+        ("cycles-yard-s303-remove", "cycles-yard-s303-remove+jpeg75", "jpeg75", 303)]
+    assert len(lines) == 2 and all(ln.startswith("recaptured ") for ln in lines)
+    calls.clear()
+    assert make_set.recapture_cycles(tmp_path, "calibration") == [] and calls == []
 
 
 def test_a_seed_whose_scene_cannot_be_made_is_skipped_with_its_reason(tmp_path):
