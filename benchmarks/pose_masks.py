@@ -66,7 +66,7 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
                 evidence.append(pose_combined.totem_evidence(m, R[j], K, grad, j=j))
             except BadInput:
                 evidence.append(None)
-        weighed = pose_combined.weigh_photo(evidence, R, K)
+        weighed = pose_combined.weigh_photo(evidence, R, K, grad)
         rows = []
         for j, (ev, c) in enumerate(zip(evidence, weighed)):
             if ev is None:

@@ -39,8 +39,9 @@ and across it.
 
 The photo's totems share evidence (:func:`weigh_photo`, :mod:`inverse.pose_shared`): their
 masks were drawn alike, and the band or a shadow takes the edge on few totems at once, so
-the others say which of a totem's edges is the silhouette and, for masks drawn by a tool,
-how far off its size is.
+the others say where to seek a rim whose own edges both missed it (:func:`from_offset`),
+which of a totem's edges is the silhouette and, for masks drawn by a tool, how far off its
+size is.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
 weighed", "pose: the mask's share weighed softly, and a sd that covers", "pose: the
@@ -50,7 +51,7 @@ drawn alike share their size".
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -65,8 +66,8 @@ __all__ = ["ARCS", "WINDOW_PX", "STEP_PX", "PEAK_FRACTION", "EDGE_BIAS_PX",
            "OUTER_PX", "OUTER_SOFT_PX", "AMBIGUITY", "SHARED_SD_PX", "move_of",
            "edge_share", "POSE_FROM", "uncertainty_record", "initial_centres",
            "CombinedPose", "edge_offsets", "edge_bias_px", "fit_offsets", "photo_move",
-           "Evidence", "totem_evidence", "weigh", "shared_shares", "weigh_photo",
-           "combine_centre", "combined_poses"]
+           "Evidence", "size_profile", "totem_evidence", "weigh", "shared_shares",
+           "from_offset", "weigh_photo", "combine_centre", "combined_poses"]
 
 ARCS = 12              # arcs the outline is cut into (each one edge offset)
 WINDOW_PX = 3.0        # how far along each normal the nearest edge is looked for (pixels)
@@ -268,6 +269,23 @@ class Evidence:
     x_far: np.ndarray        # ... refined by the nearest peaks
     S_far: np.ndarray
     rim_center: np.ndarray   # (3,) metres, the rim's own pose (``--pose-from photo``)
+    size_edge: np.ndarray | None = None  # the edge at each pose_shared.SIZE_GRID_PX
+    size_lateral: np.ndarray | None = None  # (2,) px, the sideways move it was read at
+
+
+def _lateral(x_n, S_n, width, x_r, x_f) -> np.ndarray:
+    """The sideways move (2,) px of the likelier edge: the nearest's where the mask's own
+    share (:func:`edge_share`) is at least a half, else the rim's."""
+    return (x_n if edge_share(x_n, S_n, width, x_r) >= 0.5 else x_f)[:2].copy()
+
+
+def size_profile(P0, R: float, K, grad, lateral) -> np.ndarray:
+    """The photo's mean step (sizes,) across the outline of ``P0`` moved sideways by
+    ``lateral`` (2,) px and grown by each size of :data:`inverse.pose_shared.SIZE_GRID_PX`
+    (the edge's bias taken off, so a size is the silhouette's offset)."""
+    g = pose_shared.SIZE_GRID_PX + edge_bias_px(P0, R, K)
+    return np.array([rim.edge_score(rim._moved(P0, R, K, np.array([*lateral, x])), R, K,
+                                    grad) for x in g])
 
 
 def totem_evidence(mask, R: float, K, grad, *, j: int = 0) -> Evidence:
@@ -290,9 +308,14 @@ def totem_evidence(mask, R: float, K, grad, *, j: int = 0) -> Evidence:
     x_r[2] -= edge_bias_px(P_m, R, K)
     x_f, S_f, _ = photo_move(P_m, R, K, grad, start=x_r, iterations=REFINE_ITERATIONS,
                              window_px=REFINE_WINDOW_PX)
+    # the edge's strength along the outline's size (the likelier edge's sideways move),
+    # for the photo's shared offset (:func:`inverse.pose_shared.shared_offset`)
+    lateral = _lateral(x_n, S_n, width, x_r, x_f)
+    size_edge = size_profile(P_m, R, K, grad, lateral)
     return Evidence(mask_center=P_m, shape_rms_px=float(shape_rms), extra2=extra2,
                     x_near=x_n, S_near=S_n, width=width, x_rim=x_r, x_far=x_f, S_far=S_f,
-                    rim_center=P_r)
+                    rim_center=P_r, size_edge=size_edge,
+                    size_lateral=lateral)
 
 
 def weigh(ev: Evidence, R: float, K, *, p: float | None = None,
@@ -326,12 +349,35 @@ def weigh(ev: Evidence, R: float, K, *, p: float | None = None,
                         shape_rms_px=ev.shape_rms_px, edge_share=p)
 
 
-def weigh_photo(evidence, R, K) -> list:
+def from_offset(e: Evidence, g: float, R: float, K, grad) -> Evidence:
+    """``e`` with its rim's edge (``x_rim``, ``x_far``, ``S_far``) sought again from the
+    photo's shared size offset ``g`` px (:func:`inverse.pose_shared.shared_offset`), the
+    nearest peaks within ``REFINE_WINDOW_PX``, where both its own edges (nearest and
+    rim's) lie on one side of ``g`` and farther than that: the band or a shadow took
+    both, so the photo's offset is a hypothesis its own evidence lacks."""
+    own = np.array([e.x_near[2], e.x_far[2]]) - g
+    if np.abs(own).min() <= REFINE_WINDOW_PX or own.min() < 0 < own.max():
+        return e                # its own edges lie there already, or on both sides
+    start = np.array([*e.size_lateral, g])
+    x, S, _ = photo_move(e.mask_center, R, K, grad, start=start,
+                         iterations=REFINE_ITERATIONS, window_px=REFINE_WINDOW_PX)
+    if not np.all(np.isfinite(S)):
+        return e
+    return replace(e, x_rim=np.array([*e.x_rim[:2], g]), x_far=x, S_far=S)
+
+
+def weigh_photo(evidence, R, K, grad=None) -> list:
     """Every totem's :class:`CombinedPose` (None where its evidence is None) from one
-    photo's :class:`Evidence` list, ``R`` (n,) metres: each share weighed with the
-    photo's others (:func:`inverse.pose_shared.shared_shares`), then each clean mask's
-    size pulled to the others' where its edge lies far from theirs
+    photo's :class:`Evidence` list, ``R`` (n,) metres: with the photo's gradients
+    ``grad``, each clean mask's rim sought again from the photo's shared size offset
+    (:func:`from_offset`); each share weighed with the photo's others
+    (:func:`inverse.pose_shared.shared_shares`), then each clean mask's size pulled to
+    the others' where its edge lies far from theirs
     (:func:`inverse.pose_shared.shared_sizes`)."""
+    g = None if grad is None else pose_shared.shared_offset(evidence, REFINE_WINDOW_PX)
+    if g is not None:
+        evidence = [from_offset(e, g, R[j], K, grad) if pose_shared.clean(e) else e
+                    for j, e in enumerate(evidence)]
     p = shared_shares(evidence, [None if e is None else
                                  edge_share(e.x_near, e.S_near, e.width, e.x_rim)
                                  for e in evidence])
@@ -364,7 +410,7 @@ def combined_poses(image, masks, K, radius) -> list[CombinedPose]:
                                 rim.SIGMA_PX)
     ev = [totem_evidence(m, float(r), K, grad, j=j) for j, (m, r) in
           enumerate(zip(masks, R))]
-    return weigh_photo(ev, R, K)
+    return weigh_photo(ev, R, K, grad)
 
 
 POSE_FROM = ("both", "photo", "mask")

@@ -5,6 +5,12 @@ a few pixels too wide, a polygon's chords), while the rim's reflection band or a
 takes the photo's edge on few totems at once. So each totem's evidence
 (:class:`inverse.pose_combined.Evidence`) is read against the photo's other totems':
 
+- where to seek the silhouette (:func:`shared_offset`): the clean masks' edge profiles
+  along the outline's size, summed, peak at the one pixel offset tool-drawn masks share,
+  while each band lies at a fraction of its own radius; a totem whose own edges both lie
+  beyond :data:`inverse.pose_combined.REFINE_WINDOW_PX` on one side of that offset has
+  its rim sought again from there (:func:`inverse.pose_combined.from_offset`).
+
 - which edge is the silhouette (:func:`shared_shares`): where a totem's nearest edge and
   its rim's strongest edge disagree on the size, the one nearer the size error the others
   show wins. Where at least two others' masks are clean conics that lie on the silhouette
@@ -21,8 +27,8 @@ takes the photo's edge on few totems at once. So each totem's evidence
 
 Sizes are the outline's growth ``g`` in pixels (:mod:`inverse.pose_combined`). Figures,
 what was tried and dropped: docs/decisions.md, "pose: the edge's bias by the outline's
-radius, and the photo's totems pooled" and "pose: clean masks drawn alike share their
-size".
+radius, and the photo's totems pooled", "pose: clean masks drawn alike share their
+size" and "pose: the rim sought from the photo's shared size offset".
 """
 
 from __future__ import annotations
@@ -32,8 +38,9 @@ import numpy as np
 from inverse import rim
 
 __all__ = ["AMBIGUITY", "SHARED_SD_PX", "CLEAN_SHAPE_PX", "SURE_SHARE", "AGREE_PX",
-           "TIGHT_SD_PX", "POOL_SD_PX", "POOL_KNEE_SD", "POOL_SOFT_SD", "consensus", "shared_shares", "shared_sizes",
-           "pooled"]
+           "TIGHT_SD_PX", "POOL_SD_PX", "POOL_KNEE_SD", "POOL_SOFT_SD", "SIZE_GRID_PX",
+           "MIN_SHARED", "MIN_SUPPORT", "shared_offset", "consensus", "clean",
+           "shared_shares", "shared_sizes", "pooled"]
 
 AMBIGUITY = 0.1        # a share counts as if within this of 0 and 1 (never certain)
 SHARED_SD_PX = 0.3     # the least spread of the others' rims' size among a photo's totems
@@ -44,6 +51,28 @@ TIGHT_SD_PX = 0.15     # the least spread of clean masks' size error among a pho
 POOL_SD_PX = 0.5       # sizes are pooled only where the others agree this well (1 sd)
 POOL_KNEE_SD = 2.0     # a size this many sd from the others' is pulled to theirs, ...
 POOL_SOFT_SD = 0.5     # ... its own weight falling by exp(-1/2) every this much further
+SIZE_GRID_PX = np.arange(-4.0, 4.01, 0.25)  # the sizes the shared offset is sought over
+MIN_SHARED = 3         # clean masks a photo needs for a shared offset, ...
+MIN_SUPPORT = 2        # ... and masks with an edge of their own there
+
+
+def shared_offset(evidence, window_px: float) -> float | None:
+    """The photo's shared size offset (px, the silhouette less the masks' outlines),
+    or None: the size at which the clean masks' edge profiles (``size_edge``), each
+    divided by its own top, sum highest, where at least :data:`MIN_SHARED` clean masks
+    give profiles and at least :data:`MIN_SUPPORT` of them have an edge of their own
+    (nearest or rim's, ``x_near`` or ``x_far``) within ``window_px`` of it. Tool-drawn
+    masks of one photo lie at one pixel offset from their silhouettes, while the rim's
+    band lies at a fraction of each radius, so the silhouettes add up and the bands
+    smear."""
+    ev = [e for e in evidence
+          if clean(e) and e.size_edge is not None and e.size_edge.max() > 0]
+    if len(ev) < MIN_SHARED:
+        return None
+    g = float(SIZE_GRID_PX[int(np.argmax(np.sum([e.size_edge / e.size_edge.max()
+                                                  for e in ev], 0)))])
+    support = sum(min(abs(e.x_near[2] - g), abs(e.x_far[2] - g)) <= window_px for e in ev)
+    return g if support >= MIN_SUPPORT else None
 
 
 def consensus(values, floor_px: float) -> tuple[float, float]:
@@ -54,12 +83,13 @@ def consensus(values, floor_px: float) -> tuple[float, float]:
     return mu, max(floor_px ** 2, (1.4826 * float(np.median(np.abs(v - mu)))) ** 2)
 
 
-def _clean(e) -> bool:
+def clean(e) -> bool:
+    """The mask's outline lies within :data:`CLEAN_SHAPE_PX` rms of a conic."""
     return e is not None and e.shape_rms_px <= CLEAN_SHAPE_PX
 
 
 def _sure(e, p) -> bool:
-    return _clean(e) and p is not None and p >= SURE_SHARE and \
+    return clean(e) and p is not None and p >= SURE_SHARE and \
         abs(e.x_near[2] - e.x_far[2]) <= AGREE_PX
 
 
@@ -81,7 +111,7 @@ def shared_shares(evidence, shares) -> list:
             continue
         sure = [f.x_near[2] for i, f in enumerate(evidence)
                 if i != j and _sure(f, shares[i])]
-        mu, tau2 = consensus(sure, TIGHT_SD_PX) if _clean(e) and len(sure) >= 2 else \
+        mu, tau2 = consensus(sure, TIGHT_SD_PX) if clean(e) and len(sure) >= 2 else \
             consensus(others, SHARED_SD_PX)
         log_like = []                  # the near edge's, then the rim's (refined)
         for x, S in ((e.x_near, e.S_near), (e.x_far, e.S_far)):
@@ -99,12 +129,12 @@ def shared_sizes(evidence, sizes) -> list:
     tau2)`` px and px^2, or None: only for a clean mask (:data:`CLEAN_SHAPE_PX`) with at
     least two clean others whose weighed sizes ``sizes`` (one px value a totem, NaN
     where none) agree within :data:`POOL_SD_PX`."""
-    g = np.array([s if _clean(e) else np.nan for e, s in zip(evidence, sizes)], np.float64)
+    g = np.array([s if clean(e) else np.nan for e, s in zip(evidence, sizes)], np.float64)
     out = []
     for j, e in enumerate(evidence):
         others = np.delete(g, j)
         others = others[np.isfinite(others)]
-        prior = consensus(others, TIGHT_SD_PX) if _clean(e) and len(others) >= 2 else None
+        prior = consensus(others, TIGHT_SD_PX) if clean(e) and len(others) >= 2 else None
         out.append(prior if prior is not None and prior[1] <= POOL_SD_PX ** 2 else None)
     return out
 

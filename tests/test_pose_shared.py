@@ -69,3 +69,53 @@ def test_masks_sure_of_their_edges_outvote_a_rim_pulled_aside():
     assert pose_shared.shared_shares(exact, [0.3, 0.5, 0.5, 0.5])[0] < 0.8
     grown = [_evidence(0.0, -1.5)] + [_evidence(g, -1.5) for g in (0.0, -0.05, 0.05)]
     assert pose_shared.shared_shares(grown, [0.7, 1.0, 1.0, 1.0])[0] < 0.1
+
+
+def _profiled(g_sil, g_band, *, shape_rms=0.2, band=1.3):
+    """Evidence whose edge profile along the size peaks at the silhouette ``g_sil`` px
+    and, ``band`` times as strongly, at the band ``g_band`` px; its own nearest and rim's
+    edges both on the band."""
+    x = pose_shared.SIZE_GRID_PX
+    prof = np.exp(-0.5 * ((x - g_sil) / 0.5) ** 2) + band * np.exp(-0.5 * ((x - g_band) / 0.5) ** 2)
+    e = _evidence(g_band, g_band, shape_rms=shape_rms)
+    e.size_edge, e.size_lateral = prof, np.zeros(2)
+    return e
+
+
+def test_the_shared_offset_is_where_the_silhouettes_add_up_not_the_bands():
+    """Masks shrunk 2 px alike: each totem's band (a fraction of its radius) is its
+    strongest edge, at a different size on each, but the silhouettes at +2 px add up.
+    Without two totems whose own edges lie there, or with fewer than three clean masks
+    (polygons' error is their own), there is no shared offset."""
+    ev = [_profiled(2.0, g) for g in (-1.0, 0.0, 0.5)] + [_profiled(2.0, 1.6)] * 2
+    g = pose_shared.shared_offset(ev, 1.0)
+    assert g is not None and abs(g - 2.0) <= 0.25, g
+    assert pose_shared.shared_offset(ev[:3], 1.0) is None          # no own edge there
+    polys = [_profiled(2.0, g, shape_rms=0.8) for g in (-1.0, 0.0, 0.5, 1.6, 1.6)]
+    assert pose_shared.shared_offset(polys, 1.0) is None
+
+
+def test_a_rim_whose_own_edges_missed_the_shared_offset_is_sought_there():
+    """A bright disc whose dark band lies 3 px inside its silhouette, a mask drawn on
+    the band: sought from the photo's offset (+3 px) the rim finds the silhouette; a
+    totem with an edge of its own near the offset, or on both sides of it, is left."""
+    from inverse import rim
+    from scenes import silhouette
+
+    uv = camera.project(K, P0[None])[0]
+    r = K[0, 0] * np.tan(np.arcsin(R0 / np.linalg.norm(P0)))
+    yy, xx = np.mgrid[0:240, 0:320] + 0.5
+    d = np.hypot(xx - uv[0], yy - uv[1])
+    img = np.where(d < r, 0.8, 0.2) * np.where(np.abs(d - (r - 3.0)) < 0.5, 0.0, 1.0)
+    img = np.repeat(img[..., None], 3, -1).astype(np.float32)
+    grad = silhouette.gradients(img, rim.SIGMA_PX)
+    P_m = rim._moved(P0, R0, K, np.array([0.0, 0.0, -3.0]))    # the mask on the band
+    e = _evidence(0.0, 0.0)
+    e.mask_center, e.size_lateral = P_m, np.zeros(2)
+    found = pose_combined.from_offset(e, 3.0, R0, K, grad)
+    assert abs(found.x_far[2] - 3.0) < 0.35, found.x_far
+    assert found.x_rim[2] == 3.0
+    for near, far in ((2.5, 0.0), (3.5, 2.0)):                  # near it / both sides
+        e2 = _evidence(near, far)
+        e2.mask_center, e2.size_lateral = P_m, np.zeros(2)
+        assert pose_combined.from_offset(e2, 3.0, R0, K, grad) is e2
