@@ -45,8 +45,8 @@ size is.
 
 Figures, what was tried and dropped: docs/decisions.md, "pose: the mask and the photo
 weighed", "pose: the mask's share weighed softly, and a sd that covers", "pose: the
-edge's bias by the outline's radius, and the photo's totems pooled" and "pose: clean masks
-drawn alike share their size".
+edge's bias by the outline's radius, and the photo's totems pooled", "pose: clean masks
+drawn alike share their size" and "pose: the rim sought from the photo's shared size offset".
 """
 
 from __future__ import annotations
