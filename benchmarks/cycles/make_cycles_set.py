@@ -16,7 +16,8 @@ renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
                                   photo outside the totems re-rendered by Cycles without
                                   it (``convert.write_removed``)
   _renders/s<seed>/               Cycles' own output (render.json, photo, ids...), kept;
-                                  a render found there finished is not made again.
+                                  a render found there finished is not made again
+                                  (unless the removal is asked and it was made without).
 
 Exit 2 with one line for bad arguments or a missing .venv-cycles; 1 when a render fails
 (its log is in ``_renders/s<seed>/render.log``).
@@ -25,6 +26,7 @@ Exit 2 with one line for bad arguments or a missing .venv-cycles; 1 when a rende
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 import time
@@ -40,9 +42,20 @@ from scenes.errors import BadInput  # noqa: E402
 PY = ROOT / ".venv-cycles" / "bin" / "python"
 
 
+def finished(rdir: Path, remove: bool) -> bool:
+    """Whether the render in ``rdir`` serves: it finished and, when a removal is asked,
+    it was asked for one too (one made without is made again: Cycles renders a seed to
+    the same pixels, so the scene already written from it still holds)."""
+    try:
+        rec = json.loads((rdir / "render.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return not remove or bool(rec.get("remove_asked", rec.get("removed_index") is not None))
+
+
 def render(rdir: Path, seed: int, args) -> float:
-    """Cycles' render of one seed into ``rdir`` (skipped when finished); its seconds."""
-    if (rdir / "render.json").is_file():
+    """Cycles' render of one seed into ``rdir`` (skipped when ``finished``); its seconds."""
+    if finished(rdir, not args.no_remove):
         return 0.0
     cmd = [str(PY), str(Path(__file__).with_name("render.py")), str(rdir), "--seed",
            str(seed), "--samples", str(args.samples)]

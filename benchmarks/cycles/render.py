@@ -95,6 +95,7 @@ def main(argv=None) -> int:
 
     record = {"format": 1, "description": desc, "camera": bs.camera_params(),
               "blender": bpy.app.version_string, "times": times,
+              "remove_asked": bool(a.remove),
               "removed_index": None if removed is None else int(removed + 1),
               "totem_index": bs.TOTEM_INDEX, "marker_index": bs.MARKER_INDEX}
     tmp = os.path.join(out, ".render.json")
