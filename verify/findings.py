@@ -31,7 +31,9 @@ class Report:
     judged_mask.png) and ``judged_fraction`` its share of the non-totem pixels (in
     report.json); ``evidence`` the :class:`verify.evidence.Evidence` map (None for a fit
     without totem rays); ``tone`` the gains that brought ``recon`` (the view compared)
-    to the photo's exposure (:func:`verify.tone.match_gain`).
+    to the photo's exposure (:func:`verify.tone.match_gain`). ``judging`` the
+    verdict's patch grid over the whole photo (:func:`verify.verdict.judging_grid`;
+    the drivers' ``row`` and ``col`` index it), ``grid`` the heatmaps' above the totems.
     """
 
     verdict: str
@@ -60,6 +62,7 @@ class Report:
     judged_fraction: float | None = None
     evidence: object = None
     tone: dict | None = None
+    judging: patches.PatchGrid | None = None
 
     @property
     def drivers(self) -> list:

@@ -78,16 +78,17 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     protected = region.protected_region(fit.totem_points, scene.K, (W, H),
                                         n_totem_pixels=int(totem_mask.sum()),
                                         shape=region_shape)
-    grid = patches.patch_grid(totem_mask)
+    grid = patches.patch_grid(totem_mask)             # heatmap.npy's, the NeRF path's
+    judging = verdict_mod.judging_grid((H, W))         # the verdict's, the whole photo
     seen = protected & ~totem_mask
     rays = getattr(fit, "rays", None)    # None: a fit from before they were kept
     slices = None if rays is None else corroborate.ray_slices(
         rays, FrustumFrame.from_dict(fit.grid))
     ev = None if rays is None else evidence.evidence_map(
         rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices)
-    # each metric judges the protected pixels where its evidence holds (sRGB [0, 1])
-    # (only where a patch can judge them: the grid stops at the highest totem)
-    judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, grid)
+    # each metric judges the protected pixels where its evidence holds (sRGB [0, 1]),
+    # where a patch of the verdict's grid can judge them
+    judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, judging)
     # the view at the photo's exposure and white balance, read off the judged pixels
     # (the photo compared at the evidence's resolution: verify.resolution)
     fitted = recon
@@ -99,13 +100,13 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     keep = patches.patch_fraction(seen, grid) > 0
     # (ABSENT judges the points in front of the surface its three totems resolve)
     inside = patches.patch_scores({m: e for m, e in errors.items() if m != "ABSENT"},
-                                  grid, judged)
+                                  judging, judged)
     if "ABSENT" in errors:
-        inside.update(patches.patch_scores({"ABSENT": errors["ABSENT"]}, grid, seen))
-    cover = {m: patches.patch_fraction(seen if m == "ABSENT" else judged, grid)
+        inside.update(patches.patch_scores({"ABSENT": errors["ABSENT"]}, judging, seen))
+    cover = {m: patches.patch_fraction(seen if m == "ABSENT" else judged, judging)
              for m in inside}
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
-    decision = verdict_mod.decide(inside, cover, grid, thresholds=thresholds,
+    decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
                                   calibration=calibration, judged_fraction=judged_fraction)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
@@ -141,7 +142,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         skipped=_skipped(decision, scene.n_totems),
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
-        judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found)
+        judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found,
+        judging=judging)
 
 
 def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices, spacing) -> dict:

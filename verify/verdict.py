@@ -48,11 +48,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scenes.errors import BadInput
-from verify.patches import patch_fraction
+from verify.patches import GRID, MIN_PATCH_PX, PATCH_PX, PatchGrid, patch_fraction
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
            "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED", "Verdict",
-           "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
+           "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
 
 RANGE_THRESHOLD = 0.387
 """RANGE score (mean of the worst patches' :func:`verify.patches.range_distance` over
@@ -132,6 +132,24 @@ class Verdict:
     line_p_value: float | None = None
 
 
+def judging_grid(shape, *, grid: int = GRID, patch: int = PATCH_PX) -> PatchGrid:
+    """The verdict's patch grid: ``grid`` x ``grid`` patches of ``patch`` px over the
+    whole (H, W) image, laid out as the NeRF path's grid (:func:`verify.patches.patch_grid`)
+    but not stopped at the highest totem, so surfaces the totems establish below it (the
+    floor or table in front of resting totems) are judged too.
+
+    The patch side shrinks to the image's shorter side for small images. Raises BadInput
+    when that is under ``MIN_PATCH_PX``.
+    """
+    H, W = (int(v) for v in shape[:2])
+    size = min(int(patch), H, W)
+    if size < MIN_PATCH_PX:
+        raise BadInput(f"the photo is {W}x{H} px; patches need at least {MIN_PATCH_PX}")
+    rows = np.linspace(0, H - size, grid).astype(int)
+    cols = np.linspace(0, W - size, grid).astype(int)
+    return PatchGrid(rows, cols, size, H, (H, W))
+
+
 def top_k(n: int) -> int:
     """How many of the ``n`` used patches the score averages."""
     return min(n, max(TOP_K_MIN, math.ceil(TOP_K_FRACTION * n)))
@@ -158,11 +176,11 @@ def metric_score(patch_scores: np.ndarray, used: np.ndarray, *,
 def judgeable(judged: np.ndarray, grid, *, min_cover: float = MIN_COVER) -> np.ndarray:
     """The pixels of ``judged`` (H, W) bool that some patch of ``grid`` can judge, (H, W).
 
-    A patch enters the verdict when at least ``min_cover`` of it is judged, and the grid
-    stops at the highest totem's row, so judged pixels below it or in patches judged too
-    thinly weigh in no score: counted as judged they would let a photo that no patch can
-    judge pass for judged (see docs/decisions.md, 'verdict: only what a patch can judge
-    counts as judged').
+    A patch enters the verdict when at least ``min_cover`` of it is judged, so judged
+    pixels in patches judged too thinly (or, on a grid that stops at the highest totem,
+    below it) weigh in no score: counted as judged they would let a photo that no patch
+    can judge pass for judged (see docs/decisions.md, 'verdict: only what a patch can
+    judge counts as judged').
     """
     judged = np.asarray(judged, bool)
     a, b = np.nonzero(patch_fraction(judged, grid) >= min_cover)
@@ -201,7 +219,7 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
 
     Raises
     ------
-    BadInput when no patch above the totems overlaps the protected region.
+    BadInput when no patch is judged and ``judged_fraction`` is not given.
     """
     thresholds = {**THRESHOLDS, **(thresholds or {})}
     limits = {m: float(thresholds[m]) for m in patch_scores if m in thresholds}
@@ -212,8 +230,8 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     used_by = {m: np.isfinite(patch_scores[m]) & (covers[m] >= MIN_COVER) for m in judged}
     judged = [m for m in judged if used_by[m].any()]
     if not judged and judged_fraction is None:
-        raise BadInput("the protected region does not reach the image above the totems; "
-                       "this photo cannot be verified (move the totems lower or nearer)")
+        raise BadInput("no patch of the photo is judged: the totems establish too little of "
+                       "it to verify (place them nearer the subject)")
     if not judged:
         return _unverifiable(limits, grid, calibration)
     used = np.logical_or.reduce([used_by[m] for m in judged])
