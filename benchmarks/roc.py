@@ -8,14 +8,16 @@ name, the channel after a ``+``), judged by a calibration (``--calibration``, de
 the shipped one: p-value below its alpha), prints:
 
 - untouched photos over the verdict's own line (1) and over the calibration's line
-  (p-value below its alpha), per channel and per preset, with the exact binomial 95 %
-  interval of the rate;
+  (p-value below its alpha), per channel, per preset and per placement, with the exact
+  binomial 95 % interval of the rate, and the photos (untouched and edited) called
+  unverifiable;
 - per kind and channel, manipulated photos caught at each line, with interval;
 - per kind, the image-level ROC AUC of the statistic, manipulated photos against every
   untouched one, with a 95 % bootstrap interval (2000 resamples of each class);
 - per kind and channel, the mean patch AP of each judging metric;
 - per kind and preset, the AUC against that preset's untouched photos (where the
-  statistic separates and where the preset's own scores swamp an edit).
+  statistic separates and where the preset's own scores swamp an edit), and the edits
+  caught at the verdict's line (an unverifiable edit is missed).
 
 ``--plot`` draws the ROC curves per kind. Seconds.
 """
@@ -59,6 +61,17 @@ def _rate(flags) -> str:
     return f"{k} of {n} ({100 * k / n:.0f} %, {100 * lo:.0f}-{100 * hi:.0f} %)"
 
 
+def _key(run, key: str) -> str:
+    """The run's channel or preset, or its preset and placement ("box resting")."""
+    if key == "placement":
+        return f"{run['preset']} {run.get('placement') or 'floating'}"
+    return run[key]
+
+
+def _unverifiable(run) -> bool:
+    return run["verdict"] == "unverifiable"
+
+
 def _called(run) -> bool:
     """Whether the verdict itself called the photo inconsistent (its own line)."""
     return run["verdict"] == "inconsistent"
@@ -89,16 +102,21 @@ def tables(rows: list[dict], cal) -> str:
     out = [f"calibrated line: statistic {line:.3f} (p = {alpha}; calibration of {cal.n} "
            f"photos); the verdict's own line: {', '.join(f'{t:g}' for t in sorted(own))} "
            f"(p = {', '.join(f'{cal.p_value(t):.2f}' for t in sorted(own))})", ""]
-    for key in ("channel", "preset"):
+    for key in ("channel", "preset", "placement"):
         out += [f"| untouched, by {key} | over the verdict's line (95 % interval) "
-                f"| over the {100 * alpha:g} % line |", "|---|---|---|"]
-        by = defaultdict(list)
+                f"| over the {100 * alpha:g} % line | unverifiable, all photos |",
+                "|---|---|---|---|"]
+        by, every = defaultdict(list), defaultdict(list)
         for r in untouched:
-            by[r[key]].append(r)
+            by[_key(r, key)].append(r)
+        for r in rows:
+            every[_key(r, key)].append(r)
         out += [f"| {k} | {_rate(_called(r) for r in v)} | "
-                f"{_rate(r['statistic'] > line for r in v)} |" for k, v in sorted(by.items())]
+                f"{_rate(r['statistic'] > line for r in v)} | "
+                f"{_rate(_unverifiable(r) for r in every[k])} |" for k, v in sorted(by.items())]
         out += [f"| all | {_rate(_called(r) for r in untouched)} | "
-                f"{_rate(r['statistic'] > line for r in untouched)} |", ""]
+                f"{_rate(r['statistic'] > line for r in untouched)} | "
+                f"{_rate(_unverifiable(r) for r in rows)} |", ""]
     neg = [r["statistic"] for r in untouched]
     out += ["| kind | channel | caught at the verdict's line | at the "
             f"{100 * alpha:g} % line | AUC (95 % interval) | "
@@ -125,7 +143,8 @@ def tables(rows: list[dict], cal) -> str:
 
 def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
     """Markdown rows: per kind, the AUC within each preset (its untouched photos as
-    negatives), every channel."""
+    negatives), every channel; then per kind and channel, the edits each preset's
+    verdict caught."""
     presets = sorted({r["preset"] for r in untouched})
     out = ["| AUC within the preset | " + " | ".join(presets) + " |",
            "|---|" + "---|" * len(presets)]
@@ -137,6 +156,15 @@ def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
                    if r["kind"] == kind and r["preset"] == p]
             cells.append(f"{auc(neg, pos):.2f} ({len(pos)})" if neg and pos else "–")
         out.append(f"| {kind} | " + " | ".join(cells) + " |")
+    out += ["", "| caught at the verdict's line | " + " | ".join(presets) + " |",
+            "|---|" + "---|" * len(presets)]
+    for kind, ch in sorted({(r["kind"], r.get("channel", "pristine")) for r in edited}):
+        cells = []
+        for p in presets:
+            mine = [_called(r) for r in edited if r["kind"] == kind and r["preset"] == p
+                    and r.get("channel", "pristine") == ch]
+            cells.append(f"{sum(mine)} of {len(mine)}" if mine else "–")
+        out.append(f"| {kind} {ch} | " + " | ".join(cells) + " |")
     return out
 
 

@@ -42,6 +42,27 @@ def test_auc_within_each_preset_uses_that_presets_untouched_photos():
              {"kind": "color", "preset": "envmap", "statistic": 1.0}]
     untouched = [r for r in rows if r["kind"] == "none"]
     edited = [r for r in rows if r["kind"] != "none"]
-    header, _, color = roc._by_preset(untouched, edited)
+    for r in rows:
+        r["verdict"] = "inconsistent" if r["statistic"] > 1.0 else "consistent"
+    header, _, color, _, _, _, caught = roc._by_preset(untouched, edited)
     assert header.split(" | ")[1:] == ["box", "envmap |"]
     assert color == "| color | 0.50 (1) | 1.00 (1) |"
+    assert caught == "| color pristine | 1 of 1 | 0 of 1 |"      # each at its own line
+
+
+def test_untouched_rates_by_placement_and_unverifiable_photos():
+    from verify.calibration import fit_tail
+
+    def run(kind, preset, placement, verdict, t):
+        return {"kind": kind, "preset": preset, "placement": placement, "verdict": verdict,
+                "statistic": t, "threshold": 1.0, "channel": "pristine", "metrics": {}}
+    rows = [run("none", "box", "floating", "consistent", 0.2),
+            run("none", "box", "resting", "inconsistent", 1.5),
+            run("none", "box", "resting", "unverifiable", 0.1),
+            run("color", "box", "resting", "unverifiable", 0.3)]
+    cal = fit_tail(np.linspace(0.05, 1.2, 40))
+    text = roc.tables(rows, cal)
+    assert "| box resting | 1 of 2 (50 %" in text
+    line = [x for x in text.splitlines() if x.startswith("| box resting |")][0]
+    assert line.endswith("| 2 of 3 (67 %, 9-99 %) |")          # both unverifiable photos
+
