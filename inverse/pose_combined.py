@@ -284,8 +284,12 @@ def size_profile(P0, R: float, K, grad, lateral) -> np.ndarray:
     ``lateral`` (2,) px and grown by each size of :data:`inverse.pose_shared.SIZE_GRID_PX`
     (the edge's bias taken off, so a size is the silhouette's offset)."""
     g = pose_shared.SIZE_GRID_PX + edge_bias_px(P0, R, K)
-    return np.array([rim.edge_score(rim._moved(P0, R, K, np.array([*lateral, x])), R, K,
-                                    grad) for x in g])
+    P = np.array([rim._moved(P0, R, K, np.array([*lateral, x])) for x in g])
+    half = np.arcsin(np.clip(R / np.linalg.norm(P, axis=1), 0.0, 1.0))
+    qs = np.column_stack([camera.project(K, P), K[0, 0] * np.tan(half)])
+    pts, nrm = silhouette.cones_points(qs, K, rim.N_POINTS)    # every size's outline at once
+    step = silhouette.edge_at(pts.reshape(-1, 2), nrm.reshape(-1, 2), *grad)
+    return step.reshape(len(g), -1).mean(axis=1)
 
 
 def totem_evidence(mask, R: float, K, grad, *, j: int = 0) -> Evidence:
