@@ -51,6 +51,18 @@ class FitResult:
     pose_uncertainty: list | None = None  # per totem {along_mm, across_mm, mask_share}
 
 
+def pixels_read(masks, *, initial_pose: bool = False) -> np.ndarray:
+    """(H, W) bool: the photo's pixels a fit reads, inside the totem ``masks`` (n, H, W)
+    and, unless an initial pose is given, within ``rim.READ_PX`` of them (city-block
+    distance), where the rims are looked for."""
+    read = np.asarray(masks, bool).any(0)
+    if not initial_pose:
+        from scipy.ndimage import binary_dilation
+
+        read = binary_dilation(read, iterations=READ_PX)
+    return read
+
+
 def scene_fingerprint(scene: folder.Scene) -> str:
     """Hash of what a fit depends on: the pixels it reads, masks, K, key and any initial
     pose.
@@ -62,11 +74,7 @@ def scene_fingerprint(scene: folder.Scene) -> str:
     differs. The key enters only through a hash, so the fingerprint can be shared.
     """
     masks = np.asarray(scene.masks, bool)
-    read = masks.any(0)
-    if scene.initial_pose is None:
-        from scipy.ndimage import binary_dilation
-
-        read = binary_dilation(read, iterations=READ_PX)
+    read = pixels_read(masks, initial_pose=scene.initial_pose is not None)
     totem_px = np.asarray(scene.image)[read]
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(np.round(totem_px * 255).astype(np.uint8)).tobytes())

@@ -41,3 +41,61 @@ def test_render_runs_blender_only_when_the_kept_render_does_not_serve(tmp_path, 
     args.no_remove = False
     mcs.render(rdir, 301, args)
     assert len(calls) == 1 and "--remove" in calls[0] and calls[0][-1] != "--no-remove"
+
+
+def _removal_case(tmp_path, object_box):
+    """A scene folder (one totem) and a render folder whose removed.png differs from the
+    photo by the renders' noise everywhere and by the object within ``object_box``."""
+    import numpy as np
+
+    from benchmarks.cycles import convert
+    from scenes import folder
+    from scenes.files import write_image
+
+    H, W = 96, 128
+    rng = np.random.default_rng(0)
+    photo = rng.integers(40, 200, (H, W, 3)).astype(np.uint8)
+    yy, xx = np.mgrid[:H, :W]
+    mask = (xx - 40) ** 2 + (yy - 48) ** 2 <= 12 ** 2
+    K = np.array([[100.0, 0, W / 2], [0, 100.0, H / 2], [0, 0, 1]])
+    scene = folder.write_scene(tmp_path / "scene", image=photo / 255.0, K=K, masks=[mask],
+                               radius=0.05, ior=1.5)
+    removed = np.clip(photo.astype(int) + rng.choice([-6, 6], photo.shape), 0, 255)
+    ids = np.zeros((H, W), np.int32)
+    x0, y0, x1, y1 = object_box
+    ids[y0:y1, x0:x1] = 3
+    removed[y0:y1, x0:x1] = (250, 10, 10)
+    rdir = tmp_path / "render"
+    rdir.mkdir()
+    (rdir / "render.json").write_text(json.dumps({"removed_index": 3,
+                                                  "description": {"seed": 1}}))
+    np.save(rdir / "ids.npy", ids)
+    write_image(rdir / "removed.png", removed.astype(np.uint8))
+    return convert.write_removed(rdir, scene, tmp_path / "removed"), scene
+
+
+def test_a_removal_away_from_the_totems_shares_its_photos_fit(tmp_path):
+    """The renders' noise is not taken into the band a fit reads, so the copy keeps the
+    photo's fingerprint (one fit serves both, as for a forger's copy); the object's own
+    pixels and the noise elsewhere are taken."""
+    import numpy as np
+
+    from inverse.fit_files import pixels_read, scene_fingerprint
+    from scenes import folder
+
+    out, scene = _removal_case(tmp_path, (100, 10, 120, 40))
+    copy, orig = folder.read_scene(out), folder.read_scene(scene)
+    assert scene_fingerprint(copy) == scene_fingerprint(orig)
+    manip = np.asarray(copy.manip_mask, bool)
+    read = pixels_read(orig.masks)
+    assert manip[10:40, 100:120].all() and not (manip & read).any()
+    assert manip[~read].mean() > 0.9              # elsewhere the noise is the other render's
+
+
+def test_a_removal_inside_the_band_gets_its_own_fit(tmp_path):
+    from inverse.fit_files import scene_fingerprint
+    from scenes import folder
+
+    out, scene = _removal_case(tmp_path, (54, 40, 62, 56))     # 2-10 px right of the rim
+    assert scene_fingerprint(folder.read_scene(out)) \
+        != scene_fingerprint(folder.read_scene(scene))

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.cycles.blender_camera import opencv_from_blender
+from inverse.fit_files import pixels_read
 from scenes import camera, edits2d, folder
 
 __all__ = ["sphere_masks", "read_render", "write_untouched", "write_removed"]
@@ -98,7 +99,10 @@ def write_removed(render_dir, scene_dir, out, *, grow: int = 2,
     takes the render without the object (its shadow and light gone with it) where that
     render differs by more than ``level`` of 255 in a channel, or lies within ``grow``
     px of the object's own pixels; the totem pixels stay the photo's, so the totems
-    still see it (the preset ``remove``'s perfect forger). None when there is none.
+    still see it (the preset ``remove``'s perfect forger). Within the band a fit reads
+    around the totems (:func:`inverse.fit_files.pixels_read`) only the object's own
+    pixels change, not the two renders' noise, so the copy shares its photo's fit unless
+    the object lies there, as a forger's would. None when there is none.
 
     Written as a tampered copy of ``scene_dir`` (manip_mask.png, truth/tamper.json of
     kind ``remove``, ``renderer`` "cycles")."""
@@ -116,7 +120,8 @@ def write_removed(render_dir, scene_dir, out, *, grow: int = 2,
     removed = _png(Path(render_dir) / "removed.png")
     differs = np.abs(removed.astype(int) - photo).max(axis=-1) > level
     seen = ndimage.binary_dilation(ids == rec["removed_index"], iterations=grow)
-    take = (differs | seen) & ~totems
+    read = pixels_read(scene.masks, initial_pose=scene.initial_pose is not None)
+    take = (differs & ~read) | (seen & ~totems)
     image = np.where(take[..., None], removed, photo)
     changed = np.any(image != photo, axis=-1)
     record = {"format": 1, "editor": "cycles, rendered without the object",
