@@ -7,6 +7,8 @@ from scenes.errors import BadInput
 from verify import patches
 from verify_cases import H, W, box_mask, make_scene, texture, with_square
 
+NOTHING = 1e-6   # no distance: the photo is blurred in float32 (resolution.gaussian)
+
 
 def _grid():
     return patches.patch_grid(make_scene().masks.any(axis=0))
@@ -110,12 +112,12 @@ def _blocks():
 def test_chroma_distance_forgives_brightness_and_small_shifts():
     photo = 0.8 * _blocks()
     brighter = photo + 0.1                       # grey added: the chroma is unchanged
-    assert patches.chroma_distance(photo, brighter).max() < 1e-9
+    assert patches.chroma_distance(photo, brighter).max() < NOTHING
     assert np.abs(photo - brighter).min() > 0.09                           # L1 is not
     # the recon 3 px off: every blurred photo value lies in the recon's 16-px range
     shifted = np.roll(photo, (3, -3), axis=(0, 1))
     d = patches.chroma_distance(photo, shifted)
-    assert d[20:-20, 20:-20].max() < 1e-9
+    assert d[20:-20, 20:-20].max() < NOTHING
     assert np.abs(photo - shifted).mean(axis=2)[20:-20, 20:-20].max() > 0.1
 
 
@@ -126,7 +128,7 @@ def test_chroma_distance_finds_a_colour_that_is_not_there():
     d = patches.chroma_distance(photo, recon)
     # its chroma (-0.3, 0, 0.3) against the recon's (0.1, 0, -0.1): 0.8 / 3 at the centre
     assert d[80, 170] == pytest.approx(0.8 / 3, rel=1e-6)
-    assert d[:40].max() < 1e-9 and d[:, :120].max() < 1e-9       # away from the square
+    assert d[:40].max() < NOTHING and d[:, :120].max() < NOTHING       # away from the square
     # and the patch map peaks over the square: the patches that hold it all score the
     # most (their worst tenth is all square), those clear of it (and of the photo's
     # 3-px blur) nothing
@@ -137,22 +139,22 @@ def test_chroma_distance_finds_a_colour_that_is_not_there():
     holds = (x0 <= 150) & (x1 >= 190) & (y0 <= 60) & (y1 >= 100)
     apart = (x0 >= 202) | (x1 <= 138) | (y0 >= 112) | (y1 <= 48)
     assert holds.any() and heat[holds].min() == pytest.approx(heat.max())
-    assert heat[apart].max() < 1e-9
+    assert heat[apart].max() < NOTHING
 
 
 def test_range_distance_sees_brightness_but_forgives_small_shifts():
     photo = 0.8 * _blocks()
     # the recon 3 px off: every blurred photo value lies in the recon's 16-px range
     shifted = np.roll(photo, (3, -3), axis=(0, 1))
-    assert patches.range_distance(photo, shifted)[20:-20, 20:-20].max() < 1e-9
+    assert patches.range_distance(photo, shifted)[20:-20, 20:-20].max() < NOTHING
     # a grey square (no hue, so CHROMA cannot see it) darker than anything nearby
     flat = np.full((H, W, 3), 0.6)
     dark = flat.copy()
     dark[60:100, 150:190] = 0.1
-    assert patches.chroma_distance(dark, flat).max() < 1e-9
+    assert patches.chroma_distance(dark, flat).max() < NOTHING
     d = patches.range_distance(dark, flat)
     assert d[80, 170] == pytest.approx(0.5, rel=1e-6)          # 0.6 - 0.1 in each channel
-    assert d[:40].max() < 1e-9 and d[:, :120].max() < 1e-9     # away from the square
+    assert d[:40].max() < NOTHING and d[:, :120].max() < NOTHING     # away from the square
 
 
 def test_patch_labels_use_more_than_ten_percent():

@@ -234,7 +234,7 @@ def patch_scores(errors: dict[str, np.ndarray], grid: PatchGrid,
 
 
 def pixel_errors(image: np.ndarray, recon: np.ndarray, *, sigma=CHROMA_BLUR_PX,
-                 chroma_sigma=None) -> dict[str, np.ndarray]:
+                 chroma_sigma=None, blurred=None) -> dict[str, np.ndarray]:
     """Per-pixel disagreement maps between photo and reconstruction.
 
     Parameters
@@ -242,6 +242,9 @@ def pixel_errors(image: np.ndarray, recon: np.ndarray, *, sigma=CHROMA_BLUR_PX,
     image, recon : (H, W, 3) sRGB in [0, 1].
     sigma, chroma_sigma : the photo's blur (pixels, a number or an (H, W) map,
         :mod:`verify.resolution`) before RANGE and before CHROMA (default ``sigma``).
+    blurred : the photo already blurred by ``sigma``
+        (:func:`verify.resolution.blur_varying`), when the caller has it; CHROMA reads
+        it too where ``chroma_sigma`` is the same (a chroma is linear in the colour).
 
     Returns
     -------
@@ -263,10 +266,12 @@ def pixel_errors(image: np.ndarray, recon: np.ndarray, *, sigma=CHROMA_BLUR_PX,
     _, S = structural_similarity(image, recon, channel_axis=2, data_range=1.0, full=True,
                                  gaussian_weights=True, sigma=1.5,
                                  use_sample_covariance=False)
-    chroma_sigma = sigma if chroma_sigma is None else chroma_sigma
+    photo = blur_varying(image, sigma) if blurred is None else np.asarray(blurred)
+    same = chroma_sigma is None or np.array_equal(chroma_sigma, sigma)
+    hue_photo = photo if same else blur_varying(image, chroma_sigma)
     return {"L1": l1, "SSIM": 1.0 - S.mean(axis=2),
-            "CHROMA": chroma_distance(image, recon, sigma=chroma_sigma),
-            "RANGE": range_distance(image, recon, sigma=sigma)}
+            "CHROMA": chroma_distance(hue_photo, recon, sigma=0.0),
+            "RANGE": range_distance(photo, recon, sigma=0.0)}
 
 
 def chroma(rgb: np.ndarray) -> np.ndarray:

@@ -93,9 +93,10 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     # (the photo compared at the evidence's resolution: verify.resolution)
     fitted = recon
     spacing = resolution.ray_spacing(fit.totem_points, scene.K, (W, H))
-    recon, tone_found = tone.match_gain(
-        patches.blur_varying(image, resolution.photo_sigma(spacing)), recon, judged)
-    errors = _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices, spacing)
+    blurred = patches.blur_varying(image, resolution.photo_sigma(spacing))
+    recon, tone_found = tone.match_gain(blurred, recon, judged)
+    errors = _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
+                           spacing)
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     keep = patches.patch_fraction(seen, grid) > 0
     # (ABSENT judges the points in front of the surface its three totems resolve)
@@ -146,15 +147,17 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         judging=judging)
 
 
-def _pixel_errors(scene, fit, image, recon, totem_mask, ev, slices, spacing) -> dict:
+def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
+                  spacing) -> dict:
     """Every metric's per-pixel map (:mod:`verify.patches`), CORROB and ABSENT from the
     totem rays when the fit has them (CORROB from ``slices``,
     :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB; the photo
-    blurred to the rays' ``spacing`` (H, W) px (:mod:`verify.resolution`)."""
+    blurred to the rays' ``spacing`` (H, W) px (:mod:`verify.resolution`), as
+    ``blurred`` already is."""
     hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
     hue_sigma = resolution.photo_sigma(spacing, hue)
     errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
-                                  chroma_sigma=hue_sigma)
+                                  chroma_sigma=hue_sigma, blurred=blurred)
     rays = getattr(fit, "rays", None)
     if rays is not None:          # the two tests that read the totem rays themselves
         frame = FrustumFrame.from_dict(fit.grid)

@@ -101,14 +101,15 @@ def blur_varying(image: np.ndarray, sigma) -> np.ndarray:
 
 def gaussian(image: np.ndarray, sigma: float) -> np.ndarray:
     """``image`` (H, W, C) blurred by a Gaussian of ``sigma`` pixels across rows and
-    columns, float64, as ``scipy.ndimage.gaussian_filter`` (mirrored edges, 4 sigma)
-    gives it, by OpenCV's separable filter (faster on these sizes)."""
+    columns, as ``scipy.ndimage.gaussian_filter`` (mirrored edges, 4 sigma) gives it, by
+    OpenCV's separable filter in float32 (about 1e-7 of the values off; three times
+    faster than in float64), returned as float64."""
     import cv2
 
     image = np.asarray(image, np.float64)
     if sigma <= 0:
         return image.copy()
     r = int(4.0 * sigma + 0.5)
-    out = cv2.GaussianBlur(image, (2 * r + 1, 2 * r + 1), sigma, sigmaY=sigma,
-                           borderType=cv2.BORDER_REFLECT)
-    return out.reshape(image.shape)
+    out = cv2.GaussianBlur(image.astype(np.float32), (2 * r + 1, 2 * r + 1), sigma,
+                           sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
+    return out.reshape(image.shape).astype(np.float64)
