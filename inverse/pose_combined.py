@@ -376,20 +376,20 @@ def weigh_photo(evidence, R, K, grad=None) -> list:
     ``grad``, each clean mask's rim sought again from the photo's shared size offset
     (:func:`from_offset`); each share weighed with the photo's others
     (:func:`inverse.pose_shared.shared_shares`), then each clean mask's size pulled to
-    the others' where its edge lies far from theirs
-    (:func:`inverse.pose_shared.shared_sizes`)."""
+    the others' where its edge lies far from theirs, or weighed with theirs where they
+    confirm the masks exact (:func:`inverse.pose_shared.shared_sizes`)."""
     g = None if grad is None else pose_shared.shared_offset(evidence, REFINE_WINDOW_PX)
     if g is not None:
         evidence = [from_offset(e, g, R[j], K, grad) if pose_shared.clean(e) else e
                     for j, e in enumerate(evidence)]
-    p = shared_shares(evidence, [None if e is None else
-                                 edge_share(e.x_near, e.S_near, e.width, e.x_rim)
-                                 for e in evidence])
+    own = [None if e is None else edge_share(e.x_near, e.S_near, e.width, e.x_rim)
+           for e in evidence]
+    p = shared_shares(evidence, own)
     first = [None if e is None else weigh(e, R[j], K, p=p[j])
              for j, e in enumerate(evidence)]
     sizes = [np.nan if c is None else move_of(c.mask_center, c.center, R[j], K)[2]
              for j, c in enumerate(first)]
-    priors = pose_shared.shared_sizes(evidence, sizes)
+    priors = pose_shared.shared_sizes(evidence, sizes, own)
     return [c if c is None or prior is None else weigh(e, R[j], K, p=p[j], prior=prior)
             for j, (e, c, prior) in enumerate(zip(evidence, first, priors))]
 

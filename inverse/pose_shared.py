@@ -21,9 +21,12 @@ takes the photo's edge on few totems at once. So each totem's evidence
   (outline within :data:`CLEAN_SHAPE_PX` rms of a sphere's) and the others' weighed sizes
   agree within :data:`POOL_SD_PX`, a totem whose photo edge puts its mask's size error
   more than :data:`POOL_KNEE_SD` sd from theirs is pulled to theirs: its edge is taken to
-  be the band's or a shadow's, not its mask to be drawn unlike the others. A polygon or a
-  hand stroke (an outline further from a conic) errs by a fraction of each radius, not by
-  shared pixels, and keeps its own size.
+  be the band's or a shadow's, not its mask to be drawn unlike the others. Where at least
+  :data:`MIN_SURE` others are sure of their edges (the masks are confirmed exact), every
+  clean mask's size is weighed with theirs by inverse variance, with no knee: an exact
+  mask never loses to its own band or shadow. A polygon or a hand stroke (an outline
+  further from a conic) errs by a fraction of each radius, not by shared pixels, and
+  keeps its own size.
 
 Sizes are the outline's growth ``g`` in pixels (:mod:`inverse.pose_combined`). Figures,
 what was tried and dropped: docs/decisions.md, "pose: the edge's bias by the outline's
@@ -33,14 +36,16 @@ size" and "pose: the rim sought from the photo's shared size offset".
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from inverse import rim
 
 __all__ = ["AMBIGUITY", "SHARED_SD_PX", "CLEAN_SHAPE_PX", "SURE_SHARE", "AGREE_PX",
            "TIGHT_SD_PX", "POOL_SD_PX", "POOL_KNEE_SD", "POOL_SOFT_SD", "SIZE_GRID_PX",
-           "MIN_SHARED", "MIN_SUPPORT", "shared_offset", "consensus", "clean",
-           "shared_shares", "shared_sizes", "pooled"]
+           "MIN_SHARED", "MIN_SUPPORT", "MIN_SURE", "SizePrior", "shared_offset",
+           "consensus", "clean", "shared_shares", "shared_sizes", "pooled"]
 
 AMBIGUITY = 0.1        # a share counts as if within this of 0 and 1 (never certain)
 SHARED_SD_PX = 0.3     # the least spread of the others' rims' size among a photo's totems
@@ -54,6 +59,7 @@ POOL_SOFT_SD = 0.5     # ... its own weight falling by exp(-1/2) every this much
 SIZE_GRID_PX = np.arange(-4.0, 4.01, 0.25)  # the sizes the shared offset is sought over
 MIN_SHARED = 3         # clean masks a photo needs for a shared offset, ...
 MIN_SUPPORT = 2        # ... and masks with an edge of their own there
+MIN_SURE = 2           # others sure of their edges that confirm the masks exact
 
 
 def shared_offset(evidence, window_px: float) -> float | None:
@@ -124,31 +130,52 @@ def shared_shares(evidence, shares) -> list:
     return out
 
 
-def shared_sizes(evidence, sizes) -> list:
-    """Each totem's prior on its mask's size error from the photo's others, ``(mu,
-    tau2)`` px and px^2, or None: only for a clean mask (:data:`CLEAN_SHAPE_PX`) with at
-    least two clean others whose weighed sizes ``sizes`` (one px value a totem, NaN
-    where none) agree within :data:`POOL_SD_PX`."""
+class SizePrior(NamedTuple):
+    """The photo's other totems' size error (px) for one totem: median ``mu``, spread
+    squared ``tau2`` (px^2), and whether at least :data:`MIN_SURE` of them are sure of
+    their edges (``confirmed``: the masks were drawn exact)."""
+
+    mu: float
+    tau2: float
+    confirmed: bool = False
+
+
+def shared_sizes(evidence, sizes, shares=None) -> list:
+    """Each totem's :class:`SizePrior` from the photo's others, or None: only for a
+    clean mask (:data:`CLEAN_SHAPE_PX`) with at least two clean others whose weighed
+    sizes ``sizes`` (one px value a totem, NaN where none) agree within
+    :data:`POOL_SD_PX`; ``shares`` (each mask's own share, or None) tell which others
+    are sure of their edges."""
     g = np.array([s if clean(e) else np.nan for e, s in zip(evidence, sizes)], np.float64)
+    shares = [None] * len(evidence) if shares is None else shares
     out = []
     for j, e in enumerate(evidence):
         others = np.delete(g, j)
         others = others[np.isfinite(others)]
         prior = consensus(others, TIGHT_SD_PX) if clean(e) and len(others) >= 2 else None
-        out.append(prior if prior is not None and prior[1] <= POOL_SD_PX ** 2 else None)
+        if prior is None or prior[1] > POOL_SD_PX ** 2:
+            out.append(None)
+            continue
+        sure = sum(_sure(f, shares[i]) for i, f in enumerate(evidence) if i != j)
+        out.append(SizePrior(*prior, confirmed=sure >= MIN_SURE))
     return out
 
 
 def pooled(g: float, var: float, S_edge: float, prior) -> tuple[float, float]:
     """A totem's size ``g`` px and its variance ``var`` px^2 pulled to the others'
-    ``prior`` (:func:`shared_sizes`) as far as the photo's edge that set it (variance
-    ``S_edge`` px^2) lies beyond :data:`POOL_KNEE_SD` sd of it: its own weight ``t`` is 1
-    up to the knee, then falls as a Gaussian tail; the variance is the mixture's, counting
-    the gap between the two with ``t`` kept within :data:`AMBIGUITY` of 0 and 1."""
-    mu, tau2 = prior
+    ``prior`` (a :class:`SizePrior` or ``(mu, tau2)``, :func:`shared_sizes`) as far as
+    the photo's edge that set it (variance ``S_edge`` px^2) lies beyond
+    :data:`POOL_KNEE_SD` sd of it: its own weight ``t`` is 1 up to the knee, then falls
+    as a Gaussian tail; for confirmed exact masks at most the inverse-variance weight
+    ``tau2 / (tau2 + var)``. The variance is the mixture's, counting the gap between
+    the two (with ``t`` kept within :data:`AMBIGUITY` of 0 and 1 on the knee's side)."""
+    mu, tau2, confirmed = SizePrior(*prior)
     if not np.isfinite(S_edge):
         return g, var                              # no edge: nothing to doubt
     z = abs(g - mu) / np.sqrt(S_edge + tau2)
     t = float(np.exp(-0.5 * (max(z - POOL_KNEE_SD, 0.0) / POOL_SOFT_SD) ** 2))
+    if confirmed and tau2 / (tau2 + var) < t:
+        t = tau2 / (tau2 + var)
+        return mu + t * (g - mu), t * var + t * (1 - t) * (g - mu) ** 2
     q = min(max(t, AMBIGUITY), 1.0 - AMBIGUITY)
     return mu + t * (g - mu), t * var + (1 - t) * tau2 + q * (1 - q) * (g - mu) ** 2

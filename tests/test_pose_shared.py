@@ -47,6 +47,24 @@ def test_a_clean_mask_whose_edges_lie_off_the_others_takes_their_size():
             assert abs(_size(poses[0]) + 1.0) < 0.1, _size(poses[0])
 
 
+def test_masks_confirmed_exact_keep_a_size_the_edge_moved_within_the_knee():
+    """Three exact masks sure of their edges confirm how the photo's masks were drawn:
+    a fourth whose nearest and strongest edges agree 0.6 px inside (a band or a shadow,
+    within the knee's 2 sd) keeps its mask's size (within 0.15 px), and says it is less
+    sure than they are. Without the others sure (shares a half), the edge moves it."""
+    ev = [_evidence(-0.6, -0.6)] + [_evidence(g, g) for g in (0.0, 0.05, -0.05)]
+    R = np.full(4, R0)
+    own = [pose_combined.edge_share(e.x_near, e.S_near, e.width, e.x_rim) for e in ev]
+    assert own[0] < 0.9 and min(own[1:]) >= pose_shared.SURE_SHARE
+    poses = pose_combined.weigh_photo(ev, R, K)
+    assert abs(_size(poses[0])) < 0.15, _size(poses[0])
+    assert poses[0].sd_along > max(c.sd_along for c in poses[1:])
+    priors = pose_shared.shared_sizes(ev, [0.0] * 4, [0.5] * 4)
+    assert priors[0] is not None and not priors[0].confirmed
+    moved = pose_combined.weigh(ev[0], R0, K, p=own[0], prior=priors[0])
+    assert _size(moved) < -0.3, _size(moved)
+
+
 def test_the_pull_grows_smoothly_with_the_gap():
     """Within the knee a totem keeps its size; beyond it the pull grows without a jump
     and ends at the others' size."""
