@@ -23,8 +23,8 @@ takes the photo's edge on few totems at once. So each totem's evidence
   more than :data:`POOL_KNEE_SD` sd from theirs is pulled to theirs: its edge is taken to
   be the band's or a shadow's, not its mask to be drawn unlike the others. Where at least
   :data:`MIN_SURE` others are sure of their edges (the masks are confirmed exact), every
-  clean mask's size is weighed with theirs by inverse variance, with no knee: an exact
-  mask never loses to its own band or shadow. A polygon or a hand stroke (an outline
+  clean mask's size is weighed with theirs by inverse variance, however near its edge
+  (its weight at most the knee's): an exact mask never loses to its own band or shadow. A polygon or a hand stroke (an outline
   further from a conic) errs by a fraction of each radius, not by shared pixels, and
   keeps its own size.
 
