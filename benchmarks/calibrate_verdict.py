@@ -3,7 +3,7 @@
     python benchmarks/make_set.py --set calibration --out CAL --jobs 2
     totems bench CAL --out BENCH --jobs 2 --no-table1      # or --reverify after verify/
     python benchmarks/calibrate_verdict.py BENCH... [--write verify/calibration.json]
-        [--set development --skip-edited] [--line-at 0.05]
+        [--set development --skip-edited] [--line-at 0.05] [--per-metric 0.9]
 
 Reads every untouched photo's statistic (``report.json`` ``statistic``) from benches of
 the calibration set, refuses photos that are manipulated or whose seed belongs to
@@ -12,6 +12,11 @@ calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the l
 the statistics per preset and per channel, and the false alarms at ``ALPHA`` when each
 preset (and each channel) is held out, with 95 % intervals. ``--write`` stores the
 calibration the package ships.
+
+``--per-metric Q`` (with ``--line-at P``) chooses the thresholds themselves: each
+metric's at the ``Q`` quantile of its untouched scores, all times one factor that puts
+the line at p = P (:func:`per_metric_thresholds`); the statistics are then those at
+these thresholds (rounded as shipped), which ``verify/verdict.py`` must be given.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import sets  # noqa: E402
 from scenes import folder  # noqa: E402
 from scenes.errors import BadInput  # noqa: E402
 from verify import calibration  # noqa: E402
+from verify.verdict import THRESHOLDS  # noqa: E402
 
 
 def collect(bench_dir) -> list[dict]:
@@ -57,8 +63,39 @@ def collect(bench_dir) -> list[dict]:
                      "channel": run["name"].partition("+")[2] or "pristine",
                      "totems": len(desc["totems"]),
                      "manipulated": (scene / "manip_mask.png").is_file(),
-                     "statistic": calibration.statistic_of(report)})
+                     "statistic": calibration.statistic_of(report),
+                     "scores": metric_scores(report)})
     return rows
+
+
+def metric_scores(report: dict) -> dict:
+    """{metric: score} of a report.json, each metric the verdict judged by (its own
+    units, before its threshold)."""
+    return {m: float(v["score"]) for m, v in (report.get("scores") or {}).items()
+            if m in THRESHOLDS and isinstance(v, dict) and v.get("score") is not None}
+
+
+def statistic_at(scores: dict, thresholds: dict) -> float:
+    """The verdict's statistic at ``thresholds``: the largest score over its threshold,
+    0 where no metric judged (as :func:`verify.verdict.decide`)."""
+    return max((s / thresholds[m] for m, s in scores.items()), default=0.0)
+
+
+def per_metric_thresholds(rows: list[dict], quantile: float, line_at: float) -> dict:
+    """Thresholds that put each metric's untouched tail on one footing: each metric's
+    ``quantile`` of the rows' scores, times the one factor at which the line (1) falls
+    at p = ``line_at`` of the rows' statistics; rounded to 3 decimals."""
+    scale = {}
+    for m in THRESHOLDS:
+        vals = [r["scores"][m] for r in rows if m in r["scores"]]
+        if not vals:
+            raise BadInput(f"no photo was judged by {m}; its threshold cannot be chosen")
+        scale[m] = float(np.quantile(vals, quantile))
+        if scale[m] <= 0:
+            raise BadInput(f"{m}'s {quantile} quantile is 0 on these photos")
+    z = [statistic_at(r["scores"], scale) for r in rows]
+    factor = calibration.fit_tail(z).line(line_at)
+    return {m: round(factor * v, 3) for m, v in scale.items()}
 
 
 def check_rows(rows: list[dict], set_name: str = "calibration") -> None:
@@ -142,12 +179,22 @@ def main(argv=None) -> int:
     p.add_argument("--line-at", type=float, default=None, metavar="P",
                    help="also print the factor to multiply the thresholds by so that the "
                         "line (score 1) falls at p = P")
+    p.add_argument("--per-metric", type=float, default=None, metavar="Q",
+                   help="with --line-at: choose each metric's threshold at the Q quantile "
+                        "of its untouched scores, all times one factor for the line at P, "
+                        "and calibrate the statistics at those thresholds")
     args = p.parse_args(argv)
+    if args.per_metric is not None and (args.line_at is None
+                                        or not 0.0 < args.per_metric < 1.0):
+        p.error("--per-metric Q needs 0 < Q < 1 and --line-at P")
     try:
         rows = [row for bench in args.bench for row in collect(bench)]
         if args.skip_edited:
             rows = [r for r in rows if not r["manipulated"]]
         check_rows(rows, args.set)
+        if args.per_metric is not None:
+            chosen = per_metric_thresholds(rows, args.per_metric, args.line_at)
+            rows = [{**r, "statistic": statistic_at(r["scores"], chosen)} for r in rows]
     except BadInput as e:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
         return 2
@@ -158,9 +205,16 @@ def main(argv=None) -> int:
               "channels": sorted({r["channel"] for r in rows}),
               "totems": sorted({r["totems"] for r in rows}),
               "commit": _commit(), "date": date.today().isoformat()}
+    if args.per_metric is not None:
+        source["thresholds"] = chosen
     cal = calibration.fit_tail([r["statistic"] for r in rows], source=source)
     print(report(rows, cal))
-    if args.line_at is not None:
+    if args.per_metric is not None:
+        print("thresholds " + ", ".join(f"{m} {v:.3f}" for m, v in chosen.items())
+              + f" (each metric's {args.per_metric:g} quantile, one factor; the line at "
+              f"p = {cal.p_value(1.0):.3f}); verify/verdict.py's: "
+              + ", ".join(f"{m} {v:.3f}" for m, v in THRESHOLDS.items()))
+    elif args.line_at is not None:
         print(f"thresholds x {cal.line(args.line_at):.4f} put the line at p = {args.line_at}")
     if args.write:
         folder.write_json(args.write, cal.to_json())

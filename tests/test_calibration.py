@@ -89,7 +89,8 @@ def test_the_verdict_reports_the_p_values_beside_its_line():
 
 
 def _bench(tmp_path, rows):
-    """A bench folder of finished checks: (name, preset, seed, statistic) each."""
+    """A bench folder of finished checks: (name, preset, seed, statistic) each, the
+    statistic a number or {metric: score} (the report's per-metric scores)."""
     runs = []
     for name, preset, seed, stat in rows:
         scene = tmp_path / "set" / name
@@ -98,7 +99,10 @@ def _bench(tmp_path, rows):
             {"preset": preset, "seed": seed, "totems": [{}] * 4}))
         rep = tmp_path / "bench" / "runs" / f"{name}-joint" / "verify" / "report.json"
         rep.parent.mkdir(parents=True)
-        rep.write_text(json.dumps({"statistic": stat}))
+        rep.write_text(json.dumps(
+            {"statistic": stat} if not isinstance(stat, dict) else
+            {"statistic": max(v / verdict.THRESHOLDS[m] for m, v in stat.items()),
+             "scores": {m: {"score": v} for m, v in stat.items()}}))
         runs.append({"scene": str(scene), "name": name, "mode": "joint", "status": "ok"})
     (tmp_path / "bench" / "bench.json").write_text(json.dumps({"runs": runs}))
     return tmp_path / "bench"
@@ -139,6 +143,36 @@ def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys
     assert calibrate_verdict.main([str(_bench(tmp_path, rows))]) == 0
     printed = capsys.readouterr().out
     assert "| window | 8 |" in printed and "| pristine |" not in printed
+
+
+def test_per_metric_thresholds_put_each_metric_on_its_own_spread(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    rows = []
+    for k, p in enumerate(("box", "envmap", "window", "outdoor", "tabletop")):
+        for s in range(11, 19):            # RANGE's untouched scores ten times UNSEEN's
+            u = rng.lognormal(0.0, 0.4, 3)
+            rows.append((f"{p}-{s}", p, s, {"RANGE": 0.1 * u[0], "UNSEEN": 0.01 * u[1],
+                                            "ABSENT": 0.02 * u[2]}))
+    out = tmp_path / "cal.json"
+    bench = _bench(tmp_path / "a", rows)
+    assert calibrate_verdict.main([str(bench), "--per-metric", "0.9", "--line-at", "0.05",
+                                   "--write", str(out)]) == 0
+    chosen = calibration.load(out).source["thresholds"]
+    q = {m: np.quantile([r[3][m] for r in rows], 0.9) for m in chosen}
+    assert chosen["RANGE"] / chosen["UNSEEN"] == pytest.approx(q["RANGE"] / q["UNSEEN"],
+                                                                rel=0.05)
+    assert chosen["UNSEEN"] < 0.5 * verdict.THRESHOLDS["UNSEEN"]
+    cal = calibration.load(out)
+    assert cal.p_value(1.0) == pytest.approx(0.05, rel=0.05)
+    over = sum(max(v / chosen[m] for m, v in r[3].items()) > 1 for r in rows)
+    assert 0 < over <= 5                   # about 5 % of 40 over the line
+    assert "thresholds RANGE" in capsys.readouterr().out
+
+    no_absent = [(n, p, s, {m: v for m, v in d.items() if m != "ABSENT"})
+                 for n, p, s, d in rows]
+    assert calibrate_verdict.main([str(_bench(tmp_path / "b", no_absent)), "--per-metric",
+                                   "0.9", "--line-at", "0.05"]) == 2
+    assert "no photo was judged by ABSENT" in capsys.readouterr().err
 
 
 def test_the_shipped_calibration_reads_and_puts_the_line_near_five_percent():
