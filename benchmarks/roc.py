@@ -19,7 +19,10 @@ the shipped one: p-value below its alpha), prints:
   statistic separates and where the preset's own scores swamp an edit), and the edits
   caught at the verdict's line (an unverifiable edit is missed).
 
-``--plot`` draws the ROC curves per kind. Seconds.
+``--thresholds RANGE=T,UNSEEN=T,ABSENT=T`` judges the runs at other thresholds than
+those they were verified at, from each run's per-metric scores (:func:`rejudge`; the
+thresholds move no score, so no verify is needed). ``--plot`` draws the ROC curves per
+kind. Seconds.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from verify.calibration import clopper_pearson, load, statistic_of
+from verify.verdict import MIN_JUDGED, THRESHOLDS
 
 JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
 
@@ -50,6 +54,44 @@ def load_runs(bench_dirs) -> list[dict]:
             rows.append({**r, "statistic": t,
                          "channel": r["name"].partition("+")[2] or "pristine"})
     return rows
+
+
+def rejudge(rows: list[dict], thresholds: dict) -> list[dict]:
+    """The rows as the verdict calls them at ``thresholds`` ({metric: threshold}, the
+    others as they were): statistic the largest score over its threshold (0 where no
+    metric judged), inconsistent above 1, else unverifiable where the run was or its
+    ``judged_fraction`` is under ``MIN_JUDGED``, else consistent (docs/contract.md,
+    "Verdict")."""
+    out = []
+    for r in rows:
+        scores = {m: v["score"] for m, v in (r.get("scores") or {}).items()
+                  if isinstance(v, dict) and v.get("score") is not None}
+        limits = {m: float(thresholds.get(m) or r["scores"][m].get("threshold")
+                           or THRESHOLDS[m]) for m in scores}
+        t = max((s / limits[m] for m, s in scores.items()), default=0.0)
+        judged = r.get("judged_fraction", (r.get("metrics") or {}).get("judged_fraction"))
+        thin = (not scores or r["verdict"] == "unverifiable"
+                or (judged is not None and judged < MIN_JUDGED))
+        verdict = "inconsistent" if t > 1.0 else "unverifiable" if thin else "consistent"
+        out.append({**r, "statistic": t, "score": t, "threshold": 1.0, "verdict": verdict})
+    return out
+
+
+def parse_thresholds(text: str) -> dict:
+    """``RANGE=0.3,UNSEEN=0.1`` -> {"RANGE": 0.3, "UNSEEN": 0.1}; SystemExit on a
+    metric the verdict does not judge by or a threshold that is not positive."""
+    out = {}
+    for item in filter(None, text.split(",")):
+        m, _, v = item.partition("=")
+        try:
+            value = float(v)
+        except ValueError:
+            value = -1.0
+        if m not in THRESHOLDS or not value > 0:
+            raise SystemExit(f"roc: --thresholds wants METRIC=VALUE with METRIC one of "
+                             f"{', '.join(THRESHOLDS)} and VALUE > 0, not {item!r}")
+        out[m] = value
+    return out
 
 
 def _rate(flags) -> str:
@@ -199,8 +241,13 @@ def main(argv=None) -> int:
     p.add_argument("--plot", type=Path, default=None)
     p.add_argument("--calibration", type=Path, default=None,
                    help="a calibration.json (default: the package's)")
+    p.add_argument("--thresholds", default=None, metavar="M=T,...",
+                   help="judge at these thresholds (RANGE, UNSEEN, ABSENT) instead of "
+                        "those the runs were verified at")
     args = p.parse_args(argv)
     rows = load_runs(args.bench)
+    if args.thresholds:
+        rows = rejudge(rows, parse_thresholds(args.thresholds))
     print(tables(rows, load(args.calibration)))
     if args.plot:
         plot(rows, args.plot)

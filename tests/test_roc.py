@@ -66,3 +66,31 @@ def test_untouched_rates_by_placement_and_unverifiable_photos():
     line = [x for x in text.splitlines() if x.startswith("| box resting |")][0]
     assert line.endswith("| 2 of 3 (67 %, 9-99 %) |")          # both unverifiable photos
 
+
+
+def _run(verdict, judged, **scores):
+    return {"name": "x", "kind": "none", "verdict": verdict, "judged_fraction": judged,
+            "scores": {m: {"score": s, "threshold": 0.2} for m, s in scores.items()}}
+
+
+def test_rejudge_calls_each_run_as_the_verdict_would_at_other_thresholds():
+    rows = [_run("consistent", 0.5, RANGE=0.15, UNSEEN=0.05),     # 0.75 of the line
+            _run("inconsistent", 0.5, RANGE=0.30),                # 1.5
+            _run("unverifiable", 0.02, UNSEEN=0.05),              # too little judged
+            _run("inconsistent", 0.02, UNSEEN=0.30)]              # over it, little judged
+    same = roc.rejudge(rows, {})
+    assert [r["statistic"] for r in same] == pytest.approx([0.75, 1.5, 0.25, 1.5])
+    assert [r["verdict"] for r in same] == [r["verdict"] for r in rows]
+    low = roc.rejudge(rows, {"RANGE": 0.1, "UNSEEN": 0.04})
+    assert [r["verdict"] for r in low] == ["inconsistent"] * 4
+    high = roc.rejudge(rows, {"RANGE": 1.0, "UNSEEN": 1.0})
+    assert [r["verdict"] for r in high] == ["consistent", "consistent", "unverifiable",
+                                            "unverifiable"]
+    assert high[1]["statistic"] == pytest.approx(0.3)
+
+
+def test_parse_thresholds_refuses_an_unknown_metric_or_a_threshold_not_above_zero():
+    assert roc.parse_thresholds("RANGE=0.3,UNSEEN=0.1") == {"RANGE": 0.3, "UNSEEN": 0.1}
+    for bad in ("L1=0.3", "RANGE=0", "RANGE=x", "RANGE"):
+        with pytest.raises(SystemExit):
+            roc.parse_thresholds(bad)
