@@ -5,8 +5,10 @@
     python benchmarks/calibrate_verdict.py BENCH... [--write verify/calibration.json]
         [--set development --skip-edited] [--line-at 0.05] [--per-metric 0.9]
 
-Reads every untouched photo's statistic (``report.json`` ``statistic``) from benches of
-the calibration set, refuses photos that are manipulated or whose seed belongs to
+Reads every untouched photo's per-metric scores (``report.json`` ``scores``) from benches
+of the calibration set and computes its statistic at ``verify/verdict.py``'s thresholds
+(so a change of thresholds is calibrated without checking the photos again; a report
+without scores keeps its ``statistic``), refuses photos that are manipulated or whose seed belongs to
 another set (``benchmarks/sets.py``: a figure is never reported on what it was
 calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
 the statistics per preset and per channel, and the false alarms at ``ALPHA`` when each
@@ -192,9 +194,10 @@ def main(argv=None) -> int:
         if args.skip_edited:
             rows = [r for r in rows if not r["manipulated"]]
         check_rows(rows, args.set)
-        if args.per_metric is not None:
-            chosen = per_metric_thresholds(rows, args.per_metric, args.line_at)
-            rows = [{**r, "statistic": statistic_at(r["scores"], chosen)} for r in rows]
+        chosen = (per_metric_thresholds(rows, args.per_metric, args.line_at)
+                  if args.per_metric is not None else dict(THRESHOLDS))
+        rows = [{**r, "statistic": statistic_at(r["scores"], chosen)} if r["scores"] else r
+                for r in rows]
     except BadInput as e:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
         return 2
@@ -204,9 +207,8 @@ def main(argv=None) -> int:
               "presets": sorted({r["preset"] for r in rows}),
               "channels": sorted({r["channel"] for r in rows}),
               "totems": sorted({r["totems"] for r in rows}),
-              "commit": _commit(), "date": date.today().isoformat()}
-    if args.per_metric is not None:
-        source["thresholds"] = chosen
+              "commit": _commit(), "date": date.today().isoformat(),
+              "thresholds": chosen}
     cal = calibration.fit_tail([r["statistic"] for r in rows], source=source)
     print(report(rows, cal))
     if args.per_metric is not None:

@@ -145,6 +145,21 @@ def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys
     assert "| window | 8 |" in printed and "| pristine |" not in printed
 
 
+def test_the_statistics_are_computed_at_the_shipped_thresholds(tmp_path):
+    rows = [(f"{p}-{s}", p, s, {"RANGE": 0.02 * s * (1 + k), "UNSEEN": 0.01 * s})
+            for k, p in enumerate(("box", "envmap", "window")) for s in range(11, 19)]
+    bench = _bench(tmp_path, rows)
+    for rep in bench.glob("runs/*/verify/report.json"):   # verified at other thresholds
+        d = json.loads(rep.read_text())
+        rep.write_text(json.dumps({**d, "statistic": 3.0 * d["statistic"]}))
+    out = tmp_path / "cal.json"
+    assert calibrate_verdict.main([str(bench), "--write", str(out)]) == 0
+    cal = calibration.load(out)
+    want = sorted(max(v / verdict.THRESHOLDS[m] for m, v in r[3].items()) for r in rows)
+    np.testing.assert_allclose(sorted(cal.statistics), want, rtol=1e-5)
+    assert cal.source["thresholds"] == verdict.THRESHOLDS
+
+
 def test_per_metric_thresholds_put_each_metric_on_its_own_spread(tmp_path, capsys):
     rng = np.random.default_rng(3)
     rows = []
@@ -187,3 +202,6 @@ def test_the_shipped_calibration_reads_and_puts_the_line_near_five_percent():
     assert cal.p_value(cal.line()) == pytest.approx(calibration.ALPHA, rel=1e-6)
     # the verdict's line (score 1): the word and the p-value agree, about 5 %
     assert 0.02 <= cal.p_value(1.0) <= 0.1
+    # statistics computed at thresholds the verdict no longer uses would misplace p
+    from verify.verdict import THRESHOLDS
+    assert cal.source.get("thresholds", THRESHOLDS) == THRESHOLDS
