@@ -22,7 +22,9 @@ not resolved; nor is a surface the totems see in different places (a painting hi
 from them behind an object). Limits: each totem's colour at a slice point is the mean
 of its rays there, so in front of a finely textured surface, or anywhere before a
 surface of one colour, the totems can agree on a blur they did not see at one point;
-the map then says more is established than is. Any one of 64 depths may agree: two
+the map then says more is established than is. So can totems that all see the dark: a
+window the resting totems cannot see is judged where they agree on the dark room (see
+docs/decisions.md, 'evidence: agreement counted only where the totems see texture'). Any one of 64 depths may agree: two
 totems that see unrelated smooth colours agree somewhere on about a fifth of the
 photo's cells (``tests/test_evidence.py``). RANGE and UNSEEN judge the resolved pixels
 (:mod:`verify.verdict`); ABSENT judges the slice points whose landing totems resolve
