@@ -8,9 +8,9 @@
 Reads every untouched photo's per-metric scores (``report.json`` ``scores``) from benches
 of the calibration set and computes its statistic at ``verify/verdict.py``'s thresholds
 (so a change of thresholds is calibrated without checking the photos again; a report
-without scores keeps its ``statistic``), refuses photos that are manipulated or whose seed belongs to
-another set (``benchmarks/sets.py``: a figure is never reported on what it was
-calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
+without scores keeps its ``statistic``), refuses photos that are manipulated or whose
+seed belongs to another set (``benchmarks/sets.py``: a figure is never reported on what
+it was calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
 the statistics per preset and per channel, and the false alarms at ``ALPHA`` when each
 preset (and each channel) is held out, with 95 % intervals. ``--write`` stores the
 calibration the package ships.

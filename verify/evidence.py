@@ -24,11 +24,11 @@ of its rays there, so in front of a finely textured surface, or anywhere before 
 surface of one colour, the totems can agree on a blur they did not see at one point;
 the map then says more is established than is. So can totems that all see the dark: a
 window the resting totems cannot see is judged where they agree on the dark room (see
-docs/decisions.md, 'evidence: agreement counted only where the totems see texture'). Any one of 64 depths may agree: two
-totems that see unrelated smooth colours agree somewhere on about a fifth of the
-photo's cells (``tests/test_evidence.py``). RANGE and UNSEEN judge the resolved pixels
-(:mod:`verify.verdict`); ABSENT judges the slice points whose landing totems resolve
-depth (:func:`verify.absence.absence`, ``min_parallax``).
+docs/decisions.md, 'evidence: agreement counted only where the totems see texture').
+Any one of 64 depths may agree: two totems that see unrelated smooth colours agree
+somewhere on about a fifth of the photo's cells (``tests/test_evidence.py``). RANGE and
+UNSEEN judge the resolved pixels (:mod:`verify.verdict`); ABSENT judges the slice points
+whose landing totems resolve depth (:func:`verify.absence.absence`, ``min_parallax``).
 
 The fit's own depth was not used: its grid often puts a near floor at the far plane
 (a far backdrop explains each ray on its own), and the map built on it judged a fifth
