@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from verify.calibration import clopper_pearson, load, statistic_of
-from verify.verdict import MIN_JUDGED, THRESHOLDS
+from verify.verdict import MAX_HOLDOUT, MIN_JUDGED, THRESHOLDS
 
 JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
 
@@ -59,8 +59,9 @@ def load_runs(bench_dirs) -> list[dict]:
 def rejudge(rows: list[dict], thresholds: dict) -> list[dict]:
     """The rows as the verdict calls them at ``thresholds`` ({metric: threshold}, the
     others as they were): statistic the largest score over its threshold (0 where no
-    metric judged), inconsistent above 1, else unverifiable where the run was or its
-    ``judged_fraction`` is under ``MIN_JUDGED``, else consistent (docs/contract.md,
+    metric judged): unverifiable where the fit's ``holdout`` L1 is over
+    ``MAX_HOLDOUT``, else inconsistent above 1, else unverifiable where the run was or
+    its ``judged_fraction`` is under ``MIN_JUDGED``, else consistent (docs/contract.md,
     "Verdict")."""
     out = []
     for r in rows:
@@ -72,7 +73,10 @@ def rejudge(rows: list[dict], thresholds: dict) -> list[dict]:
         judged = r.get("judged_fraction", (r.get("metrics") or {}).get("judged_fraction"))
         thin = (not scores or r["verdict"] == "unverifiable"
                 or (judged is not None and judged < MIN_JUDGED))
-        verdict = "inconsistent" if t > 1.0 else "unverifiable" if thin else "consistent"
+        held = (r.get("holdout") or {}).get("L1")
+        verdict = ("unverifiable" if held is not None and held > MAX_HOLDOUT
+                   else "inconsistent" if t > 1.0 else "unverifiable" if thin
+                   else "consistent")
         out.append({**r, "statistic": t, "score": t, "threshold": 1.0, "verdict": verdict})
     return out
 

@@ -219,6 +219,18 @@ def test_each_totems_pose_uncertainty_is_shown_beside_it():
     assert bare.to_json()["totems"][0]["pose_sd_mm"] is None
 
 
+def test_an_unverifiable_photo_says_why():
+    base = {"drivers": [], "p_value": None, "line_p_value": None, "score": 1.4,
+            "threshold": 1.0, "judged_fraction": 0.4, "evidence": {"min_judged": 0.05}}
+    held = html_report.verdict_words({**base, "verdict": "unverifiable",
+                                      "unverifiable_reason": "holdout",
+                                      "holdout": {"L1": 0.23, "max": 0.16}})["headline"]
+    assert "do not agree" in held and "0.23" in held and "0.16" in held
+    thin = html_report.verdict_words({**base, "verdict": "unverifiable", "judged_fraction": 0.02,
+                                      "unverifiable_reason": "judged"})["headline"]
+    assert "too little" in thin and "2 % judged" in thin
+
+
 def test_chances_in_words():
     assert html_report._chance(0.25) == "25 %"
     assert html_report._chance(0.01) == "1 %"

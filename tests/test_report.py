@@ -15,7 +15,7 @@ from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_
 FIELDS = {"verdict", "score", "threshold", "protected_fraction", "totems", "metrics",
           "timing_s", "versions", "scores", "drivers", "key_fingerprint", "region",
           "statistic", "p_value", "line_p_value", "skipped", "working_scale",
-          "judged_fraction", "evidence", "tone"}
+          "judged_fraction", "evidence", "tone", "holdout", "unverifiable_reason"}
 
 
 def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():

@@ -87,6 +87,11 @@ def test_rejudge_calls_each_run_as_the_verdict_would_at_other_thresholds():
     assert [r["verdict"] for r in high] == ["consistent", "consistent", "unverifiable",
                                             "unverifiable"]
     assert high[1]["statistic"] == pytest.approx(0.3)
+    # a fit whose totems do not predict each other leaves any photo unverifiable
+    gated = [{**r, "holdout": {"L1": roc.MAX_HOLDOUT + 0.01}} for r in rows]
+    assert {r["verdict"] for r in roc.rejudge(gated, {"RANGE": 0.1})} == {"unverifiable"}
+    kept = [{**r, "holdout": {"L1": roc.MAX_HOLDOUT - 0.01}} for r in rows]
+    assert [r["verdict"] for r in roc.rejudge(kept, {})] == [r["verdict"] for r in rows]
 
 
 def test_parse_thresholds_refuses_an_unknown_metric_or_a_threshold_not_above_zero():

@@ -118,6 +118,45 @@ def test_coloured_square_is_inconsistent_and_named():
     assert rep.metrics["patch_ap_CORROB"] is None        # a fit without totem rays
 
 
+def test_totems_that_do_not_predict_each_other_leave_the_photo_unverifiable():
+    # one bad patch over the line: inconsistent while the fit predicts each totem from
+    # the others; past MAX_HOLDOUT the view vouches for nothing, whatever the score
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    s = np.full((10, 10), 0.01)
+    s[3, 3:6] = 0.5
+    over = verdict.MAX_HOLDOUT + 0.01
+    for holdout in (None, verdict.MAX_HOLDOUT - 0.01):
+        d = verdict.decide({"UNSEEN": s}, np.ones_like(s), g, calibration=None,
+                           holdout=holdout)
+        assert d.verdict == "inconsistent" and d.reason is None
+    d = verdict.decide({"UNSEEN": s}, np.ones_like(s), g, calibration=None, holdout=over)
+    assert d.verdict == "unverifiable" and d.reason == "holdout" and d.score > 1.0
+    assert d.drivers and all(x["row"] == 3 for x in d.drivers)   # still shown where
+    calm = np.full((10, 10), 0.01)
+    d = verdict.decide({"UNSEEN": calm}, np.ones_like(calm), g, calibration=None,
+                       holdout=over, judged_fraction=0.5)
+    assert d.verdict == "unverifiable" and d.reason == "holdout"
+    d = verdict.decide({"UNSEEN": calm}, np.ones_like(calm), g, calibration=None,
+                       judged_fraction=0.01)
+    assert d.verdict == "unverifiable" and d.reason == "judged"
+
+
+def test_the_report_reads_the_fits_holdout_and_says_why():
+    photo = texture()
+    tampered = with_square(photo)
+    fit = make_fit(photo)
+    fit.geometry = {"chosen": "stereo", "holdout_L1": {"grid": 0.31, "stereo": 0.05}}
+    rep = verify_scene(make_scene(tampered, box_mask(SQUARE)), fit)
+    data = rep.to_json()
+    assert rep.verdict == "inconsistent" and data["holdout"]["L1"] == pytest.approx(0.05)
+    assert data["unverifiable_reason"] is None
+    fit.geometry = {"chosen": "grid", "holdout_L1": {"grid": 0.31, "stereo": 0.29}}
+    data = verify_scene(make_scene(tampered, box_mask(SQUARE)), fit).to_json()
+    assert data["verdict"] == "unverifiable" and data["unverifiable_reason"] == "holdout"
+    assert data["holdout"] == {"L1": pytest.approx(0.29), "max": verdict.MAX_HOLDOUT}
+    assert data["score"] > 1.0                     # the score is still reported
+
+
 def test_threshold_override_and_no_patches():
     photo = texture()
     rep = verify_scene(make_scene(with_square(photo)), make_fit(photo),

@@ -31,7 +31,9 @@ class Report:
     judged_mask.png) and ``judged_fraction`` its share of the non-totem pixels (in
     report.json); ``evidence`` the :class:`verify.evidence.Evidence` map (None for a fit
     without totem rays); ``tone`` the gains that brought ``recon`` (the view compared)
-    to the photo's exposure (:func:`verify.tone.match_gain`). ``judging`` the
+    to the photo's exposure (:func:`verify.tone.match_gain`); ``holdout`` the fit's
+    leave-one-totem-out error the verdict tests (:data:`verify.verdict.MAX_HOLDOUT`;
+    None for a fit without it). ``judging`` the
     verdict's patch grid over the whole photo (:func:`verify.verdict.judging_grid`;
     the drivers' ``row`` and ``col`` index it), ``grid`` the heatmaps' above the totems.
     """
@@ -63,6 +65,7 @@ class Report:
     evidence: object = None
     tone: dict | None = None
     judging: patches.PatchGrid | None = None
+    holdout: float | None = None
 
     @property
     def drivers(self) -> list:
@@ -75,7 +78,8 @@ class Report:
         :mod:`verify.calibration`), ``drivers``, ``key_fingerprint``, ``region`` (the
         protected region's shape), ``working_scale`` (:mod:`scenes.working`),
         ``judged_fraction`` and ``evidence`` (:mod:`verify.evidence`), ``tone``
-        (:mod:`verify.tone`) and a
+        (:mod:`verify.tone`), ``holdout`` and ``unverifiable_reason``
+        (:func:`verify.verdict.decide`) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -103,6 +107,9 @@ class Report:
                 "min_parallax": float(evidence.MIN_PARALLAX),
                 "resolved_fraction": _num(float(self.evidence.resolved.mean())),
                 "min_judged": float(verdict_mod.MIN_JUDGED)},
+            "holdout": {"L1": _num(self.holdout),
+                        "max": float(verdict_mod.MAX_HOLDOUT)},
+            "unverifiable_reason": self.decision.reason,
             "tone": None if self.tone is None else {
                 "gain": [_num(g) for g in self.tone["gain"]],
                 "pixels": int(self.tone["pixels"])},

@@ -38,7 +38,8 @@ _FAILED = ("  2    bad input or usage (one line on stderr saying what is wrong)\
            "  130  interrupted")
 _JUDGED = ("  0    consistent: the photo agrees with its totems\n"
            "  1    inconsistent: it does not\n"
-           "  4    unverifiable: the totems establish too little of it to tell\n")
+           "  4    unverifiable: the totems establish too little of it, or do not\n"
+           "       predict each other, to tell\n")
 EXIT_CODES = {
     "totems": "  0    ran; for verify and check: consistent\n"
               "  1    verify, check: inconsistent\n"

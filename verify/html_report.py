@@ -186,6 +186,12 @@ def verdict_words(data: dict) -> dict:
     if data["verdict"] == "consistent":
         headline = ("Consistent: nothing in the protected region disagrees with what the "
                     "totems saw.")
+    elif data["verdict"] == "unverifiable" and data.get("unverifiable_reason") == "holdout":
+        held = data.get("holdout") or {}
+        headline = (f"Unverifiable: the totems do not agree on one scene (each is predicted "
+                    f"from the others with an error of {held.get('L1') or 0.0:.2f}, at most "
+                    f"{held.get('max') or 0.0:.2f} allowed), so the view rebuilt from them "
+                    f"can vouch neither for this photo nor against it.")
     elif data["verdict"] == "unverifiable":
         judged = data.get("judged_fraction") or 0.0
         least = (data.get("evidence") or {}).get("min_judged", 0.0)

@@ -108,7 +108,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
              for m in inside}
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
     decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
-                                  calibration=calibration, judged_fraction=judged_fraction)
+                                  calibration=calibration, judged_fraction=judged_fraction,
+                                  holdout=fit_holdout(fit))
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None, "manip_judged": None}
@@ -144,6 +145,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
         judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found,
+        holdout=fit_holdout(fit),
         judging=judging)
 
 
@@ -170,6 +172,15 @@ def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
     return errors
+
+
+def fit_holdout(fit) -> float | None:
+    """The fit's leave-one-totem-out error (sRGB L1) of its best view geometry, from
+    fit.json's ``geometry.holdout_L1`` (None for a fit without it)."""
+    errors = [float(v) for v in ((getattr(fit, "geometry", None) or {})
+                                 .get("holdout_L1") or {}).values()
+              if v is not None and np.isfinite(float(v))]
+    return min(errors) if errors else None
 
 
 def _totems(scene: folder.Scene, fit) -> tuple[list, list]:

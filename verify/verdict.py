@@ -12,9 +12,10 @@ pixels, at the points its three totems resolve) and gives a score, in its units 
              for the patches at least half judged
     score_m  mean of the top-k s_p,   k = max(TOP_K_MIN, ceil(TOP_K_FRACTION * n))
 
-The photo is *inconsistent* when any metric's score exceeds its threshold
-(``THRESHOLDS``); else *unverifiable* when less than ``MIN_JUDGED`` of it is judged;
-else *consistent*. The reported ``score`` (the ``statistic``) is the largest
+The photo is *unverifiable* when its fit predicts each totem from the others worse
+than ``MAX_HOLDOUT``, whatever its score; else *inconsistent* when any metric's score
+exceeds its threshold (``THRESHOLDS``); else *unverifiable* when less than
+``MIN_JUDGED`` of it is judged; else *consistent*. The reported ``score`` (the ``statistic``) is the largest
 ``score_m / threshold_m``, so 1 is the line; its p-value, the chance an untouched photo
 of the calibration set scores as high (:mod:`verify.calibration`), is reported beside
 it, with the line's own (about 0.05). The judged patches depend on the fit alone, which
@@ -51,7 +52,8 @@ from scenes.errors import BadInput
 from verify.patches import GRID, MIN_PATCH_PX, PATCH_PX, PatchGrid, patch_fraction
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
-           "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED", "Verdict",
+           "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED",
+           "MAX_HOLDOUT", "Verdict",
            "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
 
 RANGE_THRESHOLD = 0.462
@@ -94,6 +96,15 @@ MIN_JUDGED = 0.05
 ``unverifiable``: the totems establish too little of it to call it consistent. Only the
 pixels some patch can judge count (:func:`judgeable`)."""
 
+MAX_HOLDOUT = 0.16
+"""A photo whose fit predicts each totem's pixels from the other totems' worse than this
+(sRGB L1, the best view geometry's leave-one-totem-out error, fit.json
+``geometry.holdout_L1``) is ``unverifiable`` whatever its score: the totems do not
+agree on one scene, so the view rebuilt from them can vouch neither for the photo nor
+against it. The calibration set's 95th percentile of untouched photos; only the totem
+pixels set it, so no edit outside them moves it (see docs/decisions.md, 'verdict:
+unverifiable where the totems do not predict each other')."""
+
 
 @dataclass
 class Verdict:
@@ -101,7 +112,7 @@ class Verdict:
 
     Attributes
     ----------
-    verdict : "consistent" or "inconsistent".
+    verdict : "consistent", "inconsistent" or "unverifiable".
     score : the largest of the metrics' scores, each divided by its threshold; the
         photo is inconsistent when it exceeds ``threshold`` (1).
     threshold : 1.0, the score's threshold in those units.
@@ -117,6 +128,9 @@ class Verdict:
     used : (G, G) bool, patches that entered the verdict.
     drivers : list of dicts {row, col, box [x0, y0, x1, y1], excess, metric, and each
         metric's patch value}, worst first.
+    reason : why an unverifiable photo is: "holdout" (the totems do not predict each
+        other, ``MAX_HOLDOUT``) or "judged" (too little of it judged, ``MIN_JUDGED``);
+        None otherwise.
     """
 
     verdict: str
@@ -131,6 +145,7 @@ class Verdict:
     statistic: float = float("nan")
     p_value: float | None = None
     line_p_value: float | None = None
+    reason: str | None = None
 
 
 def judging_grid(shape, *, grid: int = GRID, patch: int = PATCH_PX) -> PatchGrid:
@@ -198,7 +213,8 @@ _SHIPPED = "shipped"
 def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
            calibration=_SHIPPED, reference: str = "none",
            judged_fraction: float | None = None,
-           min_judged: float = MIN_JUDGED) -> Verdict:
+           min_judged: float = MIN_JUDGED, holdout: float | None = None,
+           max_holdout: float = MAX_HOLDOUT) -> Verdict:
     """The verdict from patch scores.
 
     Parameters
@@ -217,6 +233,8 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     reference : "none" or "median" (:func:`metric_score`).
     judged_fraction : the fraction of the photo the metrics judge; below
         ``min_judged`` a photo that is not inconsistent is ``unverifiable``.
+    holdout : the fit's leave-one-totem-out error (sRGB L1, ``MAX_HOLDOUT``); above
+        ``max_holdout`` the photo is ``unverifiable`` whatever its score (None: no test).
 
     Raises
     ------
@@ -234,7 +252,7 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
         raise BadInput("no patch of the photo is judged: the totems establish too little of "
                        "it to verify (place them nearer the subject)")
     if not judged:
-        return _unverifiable(limits, grid, calibration)
+        return _unverifiable(limits, grid, calibration, _holdout_fails(holdout, max_holdout))
     used = np.logical_or.reduce([used_by[m] for m in judged])
     medians, scores, ratios = {}, {}, []
     for m in judged:
@@ -245,23 +263,30 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     excess = np.where(used, ratios.max(axis=0), np.nan)
     worst = np.where(used, ratios.argmax(axis=0), 0)
     score = max(scores[m] / limits[m] for m in judged)
-    verdict = "inconsistent" if score > 1.0 else "consistent"
-    if verdict == "consistent" and judged_fraction is not None \
+    verdict, reason = ("inconsistent" if score > 1.0 else "consistent"), None
+    if _holdout_fails(holdout, max_holdout):
+        verdict, reason = "unverifiable", "holdout"
+    elif verdict == "consistent" and judged_fraction is not None \
             and judged_fraction < min_judged:
-        verdict = "unverifiable"
-    limit = MAX_DRIVERS if verdict == "inconsistent" else top_k(int(used.sum()))
+        verdict, reason = "unverifiable", "judged"
+    limit = MAX_DRIVERS if score > 1.0 else top_k(int(used.sum()))
     drivers = name_drivers(excess, used, grid, judged, worst, patch_scores, limit)
     p_value, line_p_value = _p_values(score, calibration)
     return Verdict(verdict, score, 1.0, scores, limits, medians, excess, used, drivers,
-                   score, p_value, line_p_value)
+                   score, p_value, line_p_value, reason)
 
 
-def _unverifiable(limits: dict, grid, calibration) -> Verdict:
+def _holdout_fails(holdout: float | None, max_holdout: float) -> bool:
+    return holdout is not None and bool(np.isfinite(holdout)) and holdout > max_holdout
+
+
+def _unverifiable(limits: dict, grid, calibration, holdout_fails: bool = False) -> Verdict:
     """The verdict of a photo no metric can judge anywhere."""
     shape = (grid.n, grid.n)
     p_value, line_p = _p_values(0.0, calibration)
     return Verdict("unverifiable", 0.0, 1.0, {}, limits, {}, np.full(shape, np.nan),
-                   np.zeros(shape, bool), [], 0.0, p_value, line_p)
+                   np.zeros(shape, bool), [], 0.0, p_value, line_p,
+                   "holdout" if holdout_fails else "judged")
 
 
 def _p_values(score: float, calibration):
