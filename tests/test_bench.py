@@ -51,6 +51,9 @@ def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
     rows = list(csv.DictReader((out / "bench.csv").open()))
     assert {r["name"]: r["status"] for r in rows} == {
         "box-1": "ok", "box-1-color": "ok", "box-1-broken": "failed"}
+    held = {r["name"]: r["holdout_L1"] for r in rows}     # the fit's, shared by the copy
+    assert float(held["box-1"]) == pytest.approx(runs["box-1"]["holdout"]["L1"])
+    assert held["box-1-color"] == held["box-1"] and held["box-1-broken"] == ""
     md = (out / "bench.md").read_text()
     assert "Failed runs" in md and "box-1-broken" in md and "| color |" in md
 

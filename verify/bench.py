@@ -304,8 +304,8 @@ def markdown(bench: dict) -> str:
 
 CSV_FIELDS = ["name", "preset", "placement", "kind", "n_totems", "mode", "status", "verdict",
               "score", "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
-              "judged_fraction", "manip_judged", *(f"patch_ap_{m}" for m in METRICS),
-              "wall_s", "fit_from", "error"]
+              "judged_fraction", "manip_judged", "holdout_L1", "unverifiable_reason",
+              *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error"]
 
 
 def csv_text(runs: list[dict]) -> str:
@@ -314,7 +314,8 @@ def csv_text(runs: list[dict]) -> str:
     w.writeheader()
     for r in runs:
         scores = {f"score_{m}": v.get("score") for m, v in (r.get("scores") or {}).items()}
-        w.writerow({**r, **(r.get("metrics") or {}), **scores})
+        held = {"holdout_L1": (r.get("holdout") or {}).get("L1")}
+        w.writerow({**r, **(r.get("metrics") or {}), **scores, **held})
     return buf.getvalue()
 
 
