@@ -157,6 +157,29 @@ def test_the_report_reads_the_fits_holdout_and_says_why():
     assert data["score"] > 1.0                     # the score is still reported
 
 
+def test_range_judges_only_where_the_totems_resolve_the_depth_well():
+    # the left half's surface is established at a parallax of 5 (depth to a fifth), the
+    # right half's at 20: UNSEEN judges both, RANGE (the view's colour at the pixel) the
+    # right half only; ABSENT the protected pixels, whatever the map says
+    from verify.evidence import MIN_PARALLAX, Evidence
+    from verify.report import metric_pixels
+
+    H, W = 240, 320
+    par = np.full((H, W), 5.0)
+    par[:, W // 2:] = 20.0
+    assert MIN_PARALLAX <= 5.0 < verdict.RANGE_MIN_PARALLAX <= 20.0
+    ev = Evidence(n_totems=np.full((H, W), 2), parallax=par, resolved=np.ones((H, W), bool),
+                  spacing=np.array([0.01, 0.01]))
+    grid = verdict.judging_grid((H, W))
+    seen = np.ones((H, W), bool)
+    judged = verdict.judgeable(seen & ev.resolved, grid)
+    where = metric_pixels(judged, seen, ev, grid)
+    assert "UNSEEN" not in where and where["ABSENT"] is seen
+    rng = where["RANGE"]
+    assert not rng[:, : W // 2 - 32].any() and rng[:, W // 2 + 32:].all()
+    assert metric_pixels(judged, seen, None, grid) == {"ABSENT": seen}
+
+
 def test_threshold_override_and_no_patches():
     photo = texture()
     rep = verify_scene(make_scene(with_square(photo)), make_fit(photo),

@@ -26,8 +26,9 @@ the map then says more is established than is. So can totems that all see the da
 window the resting totems cannot see is judged where they agree on the dark room (see
 docs/decisions.md, 'evidence: agreement counted only where the totems see texture').
 Any one of 64 depths may agree: two totems that see unrelated smooth colours agree
-somewhere on about a fifth of the photo's cells (``tests/test_evidence.py``). RANGE and
-UNSEEN judge the resolved pixels (:mod:`verify.verdict`); ABSENT judges the slice points
+somewhere on about a fifth of the photo's cells (``tests/test_evidence.py``). UNSEEN
+judges the resolved pixels, RANGE those resolved to twice the parallax
+(:mod:`verify.verdict`); ABSENT judges the slice points
 whose landing totems resolve depth (:func:`verify.absence.absence`, ``min_parallax``).
 
 The fit's own depth was not used: its grid often puts a near floor at the far plane

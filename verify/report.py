@@ -99,13 +99,11 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
                            spacing)
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     keep = patches.patch_fraction(seen, grid) > 0
-    # (ABSENT judges the points in front of the surface its three totems resolve)
-    inside = patches.patch_scores({m: e for m, e in errors.items() if m != "ABSENT"},
-                                  judging, judged)
-    if "ABSENT" in errors:
-        inside.update(patches.patch_scores({"ABSENT": errors["ABSENT"]}, judging, seen))
-    cover = {m: patches.patch_fraction(seen if m == "ABSENT" else judged, judging)
-             for m in inside}
+    where = metric_pixels(judged, seen, ev, judging)
+    inside = {}
+    for m, e in errors.items():
+        inside.update(patches.patch_scores({m: e}, judging, where.get(m, judged)))
+    cover = {m: patches.patch_fraction(where.get(m, judged), judging) for m in inside}
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
     decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
                                   calibration=calibration, judged_fraction=judged_fraction,
@@ -172,6 +170,19 @@ def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
     return errors
+
+
+def metric_pixels(judged, seen, ev, judging) -> dict:
+    """The pixels (H, W) bool a metric judges where they differ from ``judged``: ABSENT
+    the protected non-totem pixels ``seen`` (it judges the points in front of the
+    surface its three totems resolve), RANGE the judged pixels whose depth the totems
+    resolve to :data:`verify.verdict.RANGE_MIN_PARALLAX` (it reads the view's colour
+    at the pixel), kept where a patch of ``judging`` can judge them."""
+    if ev is None:
+        return {"ABSENT": seen}
+    deep = verdict_mod.judgeable(judged & (ev.parallax >= verdict_mod.RANGE_MIN_PARALLAX),
+                                 judging)
+    return {"ABSENT": seen, "RANGE": deep}
 
 
 def fit_holdout(fit) -> float | None:

@@ -1,8 +1,9 @@
 """Image-level verdict: is the photo consistent with what its totems saw?
 
-Each metric judges the pixels where its evidence holds (:mod:`verify.evidence`: RANGE
-and UNSEEN the protected pixels whose surface two totems establish, ABSENT the protected
-pixels, at the points its three totems resolve) and gives a score, in its units (sRGB):
+Each metric judges the pixels where its evidence holds (:mod:`verify.evidence`: UNSEEN
+the protected pixels whose surface two totems establish, RANGE those whose depth they
+resolve to ``RANGE_MIN_PARALLAX``, ABSENT the protected pixels, at the points its three
+totems resolve) and gives a score, in its units (sRGB):
 
     s_p      the patch's score over its judged pixels
              (:func:`verify.patches.patch_scores`): for RANGE the mean of
@@ -53,7 +54,7 @@ from verify.patches import GRID, MIN_PATCH_PX, PATCH_PX, PatchGrid, patch_fracti
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
            "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED",
-           "MAX_HOLDOUT", "Verdict",
+           "MAX_HOLDOUT", "RANGE_MIN_PARALLAX", "Verdict",
            "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
 
 RANGE_THRESHOLD = 0.462
@@ -95,6 +96,14 @@ MIN_JUDGED = 0.05
 """A photo the metrics judge less than this fraction of, and find nothing wrong in, is
 ``unverifiable``: the totems establish too little of it to call it consistent. Only the
 pixels some patch can judge count (:func:`judgeable`)."""
+
+RANGE_MIN_PARALLAX = 8.0
+"""RANGE judges a judged pixel only where the totems that establish it resolve its depth
+to at least this parallax (twice :data:`verify.evidence.MIN_PARALLAX`: depth to about an
+eighth): it compares the photo with the view's colour at that pixel, which a surface
+placed a fifth too near or far can take from another (see docs/decisions.md, 'verdict:
+RANGE only where the depth is resolved'). UNSEEN and ABSENT read every depth along
+the ray and judge where the evidence map does."""
 
 MAX_HOLDOUT = 0.16
 """A photo whose fit predicts each totem's pixels from the other totems' worse than this
