@@ -72,9 +72,10 @@ patch's worst tenth, sRGB) above which a photo is reported inconsistent.
 The three keep the ratios they were first set in (each a quarter above the largest
 untouched score of held-out seeds 11-18, with the median reference; see
 docs/decisions.md, 'verdict: RANGE_THRESHOLD 0.140' and after), scaled together so
-that the line falls at p = 0.05 of the calibration set's untouched photos, both
+that the line fell at p = 0.05 of the calibration set's untouched photos, both
 renderers (see docs/decisions.md, 'verdict: the line at 5 % with the judging grid' and
-'verdict: each metric's threshold from its own untouched spread, dropped')."""
+'verdict: each metric's threshold from its own untouched spread, dropped'); since RANGE
+judges only where the depth is resolved, at p = 0.034."""
 
 THRESHOLDS = {"RANGE": RANGE_THRESHOLD, "UNSEEN": UNSEEN_THRESHOLD,
               "ABSENT": ABSENT_THRESHOLD}
