@@ -185,3 +185,19 @@ def test_resting_reaches_the_fit_and_every_photo_of_a_check(monkeypatch, tmp_pat
     args = cli.build_parser().parse_args(["check", "a", "b", "--quiet"])
     checks.from_args(args)
     assert "--resting" not in flags["check_flags"]
+
+
+def test_the_summary_line_says_why_a_photo_is_unverifiable(capsys):
+    from verify import cli
+
+    base = {"score": 1.2, "threshold": 1.0, "scores": {}, "protected_fraction": 0.5,
+            "judged_fraction": 0.4, "metrics": {}, "verify": "out", "p_value": None}
+    cli._print_summary("check", {**base, "verdict": "unverifiable",
+                                 "unverifiable_reason": "holdout",
+                                 "holdout": {"L1": 0.3, "max": 0.16}})
+    line = capsys.readouterr().out
+    assert line.startswith("unverifiable (the totems do not predict each other")
+    assert "0.300 > 0.16" in line
+    cli._print_summary("check", {**base, "verdict": "unverifiable",
+                                 "unverifiable_reason": "judged"})
+    assert capsys.readouterr().out.startswith("unverifiable: score 1.20")

@@ -222,10 +222,9 @@ def _print_summary(verb: str, summary: dict) -> None:
         odds = "" if p is None else (f"p = {p:.2g} (the chance an untouched photo "
                                      f"scores this high; {summary['line_p_value']:.2g} "
                                      f"at the threshold), ")
-        held = summary.get("holdout") or {}
-        why = (f" (the totems do not predict each other: holdout L1 {held['L1']:.3f} > "
-               f"{held['max']:.3f})" if summary.get("unverifiable_reason") == "holdout"
-               else "")
+        why = "" if summary.get("unverifiable_reason") != "holdout" else (
+            " (the totems do not predict each other: holdout {L1:.3f} > {max})"
+            .format(**summary["holdout"]))
         print(f"{summary['verdict']}{why}: {odds}score {summary['score']:.2f} of "
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"
