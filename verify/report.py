@@ -105,9 +105,10 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         inside.update(patches.patch_scores({m: e}, judging, where.get(m, judged)))
     cover = {m: patches.patch_fraction(where.get(m, judged), judging) for m in inside}
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
+    holdout = fit_holdout(fit)
     decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
                                   calibration=calibration, judged_fraction=judged_fraction,
-                                  holdout=fit_holdout(fit))
+                                  holdout=holdout)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None, "manip_judged": None}
@@ -143,8 +144,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
         judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found,
-        holdout=fit_holdout(fit),
-        judging=judging)
+        holdout=holdout, judging=judging)
 
 
 def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,

@@ -16,10 +16,10 @@ totems resolve) and gives a score, in its units (sRGB):
 The photo is *unverifiable* when its fit predicts each totem from the others worse
 than ``MAX_HOLDOUT``, whatever its score; else *inconsistent* when any metric's score
 exceeds its threshold (``THRESHOLDS``); else *unverifiable* when less than
-``MIN_JUDGED`` of it is judged; else *consistent*. The reported ``score`` (the ``statistic``) is the largest
-``score_m / threshold_m``, so 1 is the line; its p-value, the chance an untouched photo
-of the calibration set scores as high (:mod:`verify.calibration`), is reported beside
-it, with the line's own (about 0.05). The judged patches depend on the fit alone, which
+``MIN_JUDGED`` of it is judged; else *consistent*. The reported ``score`` (the
+``statistic``) is the largest ``score_m / threshold_m``, so 1 is the line; its
+p-value, the chance an untouched photo of the calibration set scores as high
+(:mod:`verify.calibration`), is reported beside it, with the line's own (about 0.05). The judged patches depend on the fit alone, which
 an edit outside the totems leaves as it is, so at the same tone gains
 (:mod:`verify.tone`) editing more of a photo never lowers RANGE's or UNSEEN's score (an
 edit over a large share of the judged pixels moves the gains a little); the median patch, once subtracted as the scene's own
