@@ -19,10 +19,11 @@ exceeds its threshold (``THRESHOLDS``); else *unverifiable* when less than
 ``MIN_JUDGED`` of it is judged; else *consistent*. The reported ``score`` (the
 ``statistic``) is the largest ``score_m / threshold_m``, so 1 is the line; its
 p-value, the chance an untouched photo of the calibration set scores as high
-(:mod:`verify.calibration`), is reported beside it, with the line's own (about 0.05). The judged patches depend on the fit alone, which
-an edit outside the totems leaves as it is, so at the same tone gains
-(:mod:`verify.tone`) editing more of a photo never lowers RANGE's or UNSEEN's score (an
-edit over a large share of the judged pixels moves the gains a little); the median patch, once subtracted as the scene's own
+(:mod:`verify.calibration`), is reported beside it, with the line's own (about 0.05).
+The judged patches depend on the fit alone, which an edit outside the totems leaves as
+it is, so at the same tone gains (:mod:`verify.tone`) editing more of a photo never
+lowers RANGE's or UNSEEN's score (an edit over a large share of the judged pixels moves
+the gains a little); the median patch, once subtracted as the scene's own
 reconstruction error, let an edit raise its own reference (see docs/decisions.md,
 'evidence: the totems' agreement, not the fit's depth; no median reference').
 
