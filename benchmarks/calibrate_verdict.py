@@ -11,9 +11,10 @@ of the calibration set and computes its statistic at ``verify/verdict.py``'s thr
 without scores keeps its ``statistic``), refuses photos that are manipulated or whose
 seed belongs to another set (``benchmarks/sets.py``: a figure is never reported on what
 it was calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
-the statistics per preset and per channel, and the false alarms at ``ALPHA`` when each
-preset (and each channel) is held out, with 95 % intervals. ``--write`` stores the
-calibration the package ships.
+the statistics per preset and per channel, the false alarms at ``ALPHA`` when each
+preset (and each channel) is held out, with 95 % intervals, and where the line at
+``--line-at`` (default ``LINE_AT``) would fall without each (how far it pulls the line).
+``--write`` stores the calibration the package ships.
 
 ``--per-metric Q`` (with ``--line-at P``) chooses the thresholds themselves: each
 metric's at the ``Q`` quantile of its untouched scores, all times one factor that puts
@@ -40,6 +41,10 @@ from scenes import folder  # noqa: E402
 from scenes.errors import BadInput  # noqa: E402
 from verify import calibration  # noqa: E402
 from verify.verdict import THRESHOLDS  # noqa: E402
+
+LINE_AT = 0.05
+"""The p-value the verdict's line (score 1) is put at (docs/decisions.md, 'verdict: the
+line put back at p = 0.05'): the report's column of where each group pulls it."""
 
 
 def collect(bench_dir) -> list[dict]:
@@ -140,8 +145,9 @@ def _commit() -> str:
         return ""
 
 
-def report(rows: list[dict], cal: calibration.Calibration) -> str:
-    """The figures as markdown."""
+def report(rows: list[dict], cal: calibration.Calibration, *, line_at: float = LINE_AT) -> str:
+    """The figures as markdown; per group, the line at p = ``line_at`` fitted without it
+    (how far the group pulls the line up)."""
     t = np.array([r["statistic"] for r in rows])
     lines = [f"line {cal.line():.3f} at p = {cal.alpha} (tail from u = {cal.u:.3f}, "
              f"k = {cal.k} of n = {cal.n}, xi = {cal.xi:.3f}, sigma = {cal.sigma:.3f}); "
@@ -151,19 +157,21 @@ def report(rows: list[dict], cal: calibration.Calibration) -> str:
         if len(set(groups)) < 2:          # nothing to hold out
             continue
         held = calibration.leave_one_group_out(t, groups, alpha=cal.alpha)
-        lines += [f"| {key} | photos | median | largest | false alarms, {key} held out |",
-                  "|---|---|---|---|---|"]
+        pull = calibration.line_without(t, groups, alpha=line_at)
+        lines += [f"| {key} | photos | median | largest | false alarms, {key} held out "
+                  f"| line at p = {line_at:g} without it |",
+                  "|---|---|---|---|---|---|"]
         by = defaultdict(list)
         for r in rows:
             by[r[key]].append(r["statistic"])
         for name, vals in sorted(by.items()):
             k, n = held[name]
             lines.append(f"| {name} | {len(vals)} | {np.median(vals):.3f} | "
-                         f"{max(vals):.3f} | {k} of {n} |")
+                         f"{max(vals):.3f} | {k} of {n} | {pull[name]:.3f} |")
         k, n, (lo, hi) = held["all"]
         lines += [f"| all | {n} | {np.median(t):.3f} | {t.max():.3f} | {k} of {n} "
-                  f"({100 * k / n:.1f} %, 95 % interval {100 * lo:.1f}-{100 * hi:.1f} %) |",
-                  ""]
+                  f"({100 * k / n:.1f} %, 95 % interval {100 * lo:.1f}-{100 * hi:.1f} %) "
+                  f"| {pull['all']:.3f} (with every {key}) |", ""]
     return "\n".join(lines)
 
 
@@ -210,7 +218,7 @@ def main(argv=None) -> int:
               "commit": _commit(), "date": date.today().isoformat(),
               "thresholds": chosen}
     cal = calibration.fit_tail([r["statistic"] for r in rows], source=source)
-    print(report(rows, cal))
+    print(report(rows, cal, line_at=LINE_AT if args.line_at is None else args.line_at))
     if args.per_metric is not None:
         print("thresholds " + ", ".join(f"{m} {v:.3f}" for m, v in chosen.items())
               + f" (each metric's {args.per_metric:g} quantile, one factor; the line at "

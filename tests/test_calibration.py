@@ -145,6 +145,25 @@ def test_a_set_of_one_channel_calibrates_without_holding_it_out(tmp_path, capsys
     assert "| window | 8 |" in printed and "| pristine |" not in printed
 
 
+def test_a_group_of_high_untouched_scores_is_seen_pulling_the_line_up(tmp_path, capsys):
+    rng = np.random.default_rng(7)
+    rows = [(f"{p}-{s}", p, s, float(rng.gamma(2.0, 0.1)))
+            for p in ("box", "envmap", "window") for s in range(11, 19)]
+    rows += [(f"tabletop-{s}", "tabletop", s, float(1.0 + rng.gamma(2.0, 0.3)))
+             for s in range(11, 15)]
+    t = np.array([r[3] for r in rows])
+    groups = [r[1] for r in rows]
+    pull = calibration.line_without(t, groups, alpha=0.05)
+    others = calibration.fit_tail(t[np.array(groups) != "tabletop"]).line(0.05)
+    assert pull["tabletop"] == pytest.approx(others)
+    assert pull["tabletop"] < 0.8 * pull["all"]                  # the high group lifts it
+    assert abs(pull["box"] - pull["all"]) < abs(pull["tabletop"] - pull["all"])
+    assert calibrate_verdict.main([str(_bench(tmp_path, rows))]) == 0
+    printed = capsys.readouterr().out
+    assert "line at p = 0.05 without it" in printed
+    assert "| tabletop | 4 |" in printed and f"| {pull['tabletop']:.3f} |" in printed
+
+
 def test_the_statistics_are_computed_at_the_shipped_thresholds(tmp_path):
     rows = [(f"{p}-{s}", p, s, {"RANGE": 0.02 * s * (1 + k), "UNSEEN": 0.01 * s})
             for k, p in enumerate(("box", "envmap", "window")) for s in range(11, 19)]

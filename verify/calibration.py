@@ -36,7 +36,7 @@ import numpy as np
 from scenes.errors import BadInput
 
 __all__ = ["ALPHA", "TAIL_FRACTION", "SHIPPED", "Calibration", "fit_tail", "load",
-           "statistic_of", "clopper_pearson", "leave_one_group_out"]
+           "statistic_of", "clopper_pearson", "leave_one_group_out", "line_without"]
 
 ALPHA = 0.01
 """The per-photo false-alarm rate a calibrated line is computed for (benchmarks)."""
@@ -167,4 +167,19 @@ def leave_one_group_out(statistics, groups, *, alpha: float = ALPHA, **fit_kw) -
     k = sum(v[0] for v in out.values())
     n = sum(v[1] for v in out.values())
     out["all"] = (k, n, clopper_pearson(k, n))
+    return out
+
+
+def line_without(statistics, groups, *, alpha: float, **fit_kw) -> dict:
+    """Where the line at ``alpha`` falls when each group is left out of the fit: how
+    far each group (e.g. a preset) pulls the line up.
+
+    Returns {group: the line fitted on the other groups' statistics} and "all": the line
+    fitted on every statistic (statistic units).
+    """
+    t = np.asarray(statistics, np.float64)
+    g = np.asarray(groups)
+    out = {name: fit_tail(t[g != name], **fit_kw).line(alpha)
+           for name in sorted(set(g.tolist()))}
+    out["all"] = fit_tail(t, **fit_kw).line(alpha)
     return out
