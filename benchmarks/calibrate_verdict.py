@@ -145,7 +145,8 @@ def _commit() -> str:
         return ""
 
 
-def report(rows: list[dict], cal: calibration.Calibration, *, line_at: float = LINE_AT) -> str:
+def report(rows: list[dict], cal: calibration.Calibration, *,
+           line_at: float = LINE_AT) -> str:
     """The figures as markdown; per group, the line at p = ``line_at`` fitted without it
     (how far the group pulls the line up)."""
     t = np.array([r["statistic"] for r in rows])
@@ -188,7 +189,8 @@ def main(argv=None) -> int:
                    help="leave out the manipulated photos of the benches (a set with edits)")
     p.add_argument("--line-at", type=float, default=None, metavar="P",
                    help="also print the factor to multiply the thresholds by so that the "
-                        "line (score 1) falls at p = P")
+                        "line (score 1) falls at p = P, and give each group's pull on the "
+                        "line at that P (default 0.05)")
     p.add_argument("--per-metric", type=float, default=None, metavar="Q",
                    help="with --line-at: choose each metric's threshold at the Q quantile "
                         "of its untouched scores, all times one factor for the line at P, "
