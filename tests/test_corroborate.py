@@ -65,7 +65,7 @@ def test_the_right_palette_at_the_wrong_depth_is_not_corroborated(plane):
     assert np.nanmedian(centre(E_wrong)) > 2 * np.nanmedian(centre(E_true))
 
 
-def test_cell_errors_take_the_second_best_totem_at_the_best_depth():
+def test_cell_errors_take_the_second_best_totem_where_two_land_the_one_where_it_is_alone():
     # 3 totems, 2 slices, one cell; the photo's chroma is 0 (grey).
     mu = np.zeros((3, 2, 1, 1, 3))
     mu[0, 0, 0, 0] = [0.5, 0.5, 0.5]        # grey: error 0
@@ -79,7 +79,10 @@ def test_cell_errors_take_the_second_best_totem_at_the_best_depth():
     land[2, 1] = False                      # slice 1: only errors 0.0667 and 0.4 remain
     assert cell_errors(mu, land, grey)[0, 0] == pytest.approx(0.4 / 3)
     assert cell_errors(mu, land, grey, min_totems=1)[0, 0] == pytest.approx(0.0)
-    land[1:] = False                        # one totem alone corroborates nothing
+    land[1:, 0] = False                     # slice 0: totem 0 alone, its grey explains
+    assert cell_errors(mu, land, grey)[0, 0] == pytest.approx(0.0)
+    assert cell_errors(mu, land, grey, alone=False)[0, 0] == pytest.approx(0.4)  # slice 1
+    land[:] = False                         # no totem lands: nothing can be told
     assert np.isnan(cell_errors(mu, land, grey)[0, 0])
 
 

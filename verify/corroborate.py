@@ -16,10 +16,15 @@ and ``I(c)`` the photo blurred to the rays' footprint::
 
     e_jk(c) = mean over channels |chroma(I(c)) - chroma(mu_jk(c))|
     E(c)    = min over k of the ``min_totems``-th smallest e_jk(c) over the totems j
-              that land in c at slice k
+              that land in c at slice k, or, where one totem alone lands there,
+              its own e_jk(c)
 
-``E`` is NaN where no slice has ``min_totems`` totems landing: those pixels cannot be
-corroborated (too few viewpoints), and they take no part in the patch scores.
+A point only one totem's rays reach is that totem's to explain: no other viewpoint
+says anything of it, and an object near the totems is often seen by one of them alone,
+near its rim (see docs/decisions.md, 'corroborate: one totem explains a point it alone
+reaches'). Where two land, two must agree. ``E`` is NaN where no slice has a totem
+landing: those pixels cannot be corroborated, and they take no part in the patch
+scores.
 
 Limits: a forger who paints a hue that the totems see somewhere along the pixel's ray
 (the floor's colour over a removed object, a sky-coloured splice under a sky the glass
@@ -102,7 +107,8 @@ def _sample(image_c, uu, vv):
                      for c in range(image_c.shape[2])], axis=-1)
 
 
-def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.ndarray:
+def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS,
+                alone: bool = True) -> np.ndarray:
     """``E`` per cell from the slice colours (see the module docstring).
 
     Parameters
@@ -110,17 +116,22 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS) -> np.n
     mu : (n_tot, n_slices, nt, ns, 3) totems' sRGB colours per slice and cell.
     land : (n_tot, n_slices, nt, ns) bool, where each totem has rays.
     photo_chroma : (nt, ns, 3) the photo's chroma at the cells.
-    min_totems : totems that must agree.
+    min_totems : totems that must agree where several land.
+    alone : a slice point one totem alone lands at is explained by it.
 
     Returns
     -------
-    (nt, ns) float64, sRGB units, NaN where no slice has ``min_totems`` totems.
+    (nt, ns) float64, sRGB units, NaN where no slice can explain the cell.
     """
     mu = np.asarray(mu, np.float32)                # (totems, slices, cells): float32
+    land = np.asarray(land, bool)
     e = np.abs(mu - mu.mean(axis=-1, keepdims=True)
                - np.asarray(photo_chroma, np.float32)[None, None]).mean(axis=-1)
-    e = np.partition(np.where(land, e, np.inf), min_totems - 1, axis=0)[min_totems - 1]
-    best = e.min(axis=0).astype(np.float64)                            # (nt, ns)
+    e = np.where(land, e, np.inf)
+    best = np.partition(e, min_totems - 1, axis=0)[min_totems - 1]   # (slices, cells)
+    if alone:
+        best = np.minimum(best, np.where(land.sum(axis=0) == 1, e.min(axis=0), np.inf))
+    best = best.min(axis=0).astype(np.float64)                         # (nt, ns)
     return np.where(np.isfinite(best), best, np.nan)
 
 

@@ -39,7 +39,7 @@ METRIC_WORDS = {
     "SSIM": "structural difference from the re-rendered view (1 - SSIM)",
     "CHROMA": "hues the re-rendered view shows nowhere nearby",
     "RANGE": "colours, brightness included, outside the re-rendered view's range nearby",
-    "CORROB": "hues that two totems' rays do not see along the pixel's ray",
+    "CORROB": "hues the totems' rays do not see along the pixel's ray (two where two reach)",
     "UNSEEN": "hues neither the re-rendered view nor the totems' rays show",
     "ABSENT": "hues three totems saw in front of the surface that the photo lacks",
 }
