@@ -6,7 +6,10 @@
         [--set development --skip-edited] [--line-at 0.05] [--per-metric 0.9]
 
 Reads every untouched photo's per-metric scores (``report.json`` ``scores``) from benches
-of the calibration set and computes its statistic at ``verify/verdict.py``'s thresholds
+of the calibration set, leaves out those the verdict called unverifiable (never called
+inconsistent, they are no false alarm the line must hold back; docs/decisions.md,
+"verdict: calibrated on the photos it judges"), and computes the statistic at
+``verify/verdict.py``'s thresholds
 (so a change of thresholds is calibrated without checking the photos again; a report
 without scores keeps its ``statistic``), refuses photos that are manipulated or whose
 seed belongs to another set (``benchmarks/sets.py``: a figure is never reported on what
@@ -71,7 +74,8 @@ def collect(bench_dir) -> list[dict]:
                      "totems": len(desc["totems"]),
                      "manipulated": (scene / "manip_mask.png").is_file(),
                      "statistic": calibration.statistic_of(report),
-                     "scores": metric_scores(report)})
+                     "scores": metric_scores(report),
+                     "unverifiable": report.get("verdict") == "unverifiable"})
     return rows
 
 
@@ -204,6 +208,10 @@ def main(argv=None) -> int:
         if args.skip_edited:
             rows = [r for r in rows if not r["manipulated"]]
         check_rows(rows, args.set)
+        left_out = sorted(r["name"] for r in rows if r.get("unverifiable"))
+        rows = [r for r in rows if not r.get("unverifiable")]
+        if not rows:
+            raise BadInput("every photo is unverifiable; nothing to calibrate on")
         chosen = (per_metric_thresholds(rows, args.per_metric, args.line_at)
                   if args.per_metric is not None else dict(THRESHOLDS))
         rows = [{**r, "statistic": statistic_at(r["scores"], chosen)} if r["scores"] else r
@@ -212,7 +220,10 @@ def main(argv=None) -> int:
         print(f"calibrate_verdict: {e}", file=sys.stderr)
         return 2
     seeds = sorted({r["seed"] for r in rows})
-    source = {"set": args.set, "photos": len(rows),
+    if left_out:
+        print(f"left out {len(left_out)} unverifiable photo(s), which the verdict never "
+              f"calls inconsistent: {', '.join(left_out)}")
+    source = {"set": args.set, "photos": len(rows), "unverifiable_left_out": len(left_out),
               "seeds": f"{seeds[0]}-{seeds[-1]}",
               "presets": sorted({r["preset"] for r in rows}),
               "channels": sorted({r["channel"] for r in rows}),

@@ -88,9 +88,10 @@ def test_the_verdict_reports_the_p_values_beside_its_line():
         assert (d.p_value < d.line_p_value) == (d.score > 1.0)
 
 
-def _bench(tmp_path, rows):
+def _bench(tmp_path, rows, unverifiable=()):
     """A bench folder of finished checks: (name, preset, seed, statistic) each, the
-    statistic a number or {metric: score} (the report's per-metric scores)."""
+    statistic a number or {metric: score} (the report's per-metric scores); the photos
+    named in ``unverifiable`` were called so."""
     runs = []
     for name, preset, seed, stat in rows:
         scene = tmp_path / "set" / name
@@ -100,9 +101,10 @@ def _bench(tmp_path, rows):
         rep = tmp_path / "bench" / "runs" / f"{name}-joint" / "verify" / "report.json"
         rep.parent.mkdir(parents=True)
         rep.write_text(json.dumps(
-            {"statistic": stat} if not isinstance(stat, dict) else
-            {"statistic": max(v / verdict.THRESHOLDS[m] for m, v in stat.items()),
-             "scores": {m: {"score": v} for m, v in stat.items()}}))
+            ({"statistic": stat} if not isinstance(stat, dict) else
+             {"statistic": max(v / verdict.THRESHOLDS[m] for m, v in stat.items()),
+              "scores": {m: {"score": v} for m, v in stat.items()}})
+            | {"verdict": "unverifiable" if name in unverifiable else "consistent"}))
         runs.append({"scene": str(scene), "name": name, "mode": "joint", "status": "ok"})
     (tmp_path / "bench" / "bench.json").write_text(json.dumps({"runs": runs}))
     return tmp_path / "bench"
@@ -162,6 +164,25 @@ def test_a_group_of_high_untouched_scores_is_seen_pulling_the_line_up(tmp_path, 
     printed = capsys.readouterr().out
     assert "line at p = 0.05 without it" in printed
     assert "| tabletop | 4 |" in printed and f"| {pull['tabletop']:.3f} |" in printed
+
+
+def test_unverifiable_photos_do_not_set_the_line(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    rows = [(f"{p}-{s}", p, s, float(rng.gamma(2.0, 0.1)))
+            for p in ("box", "envmap", "window") for s in range(11, 19)]
+    high = [("box-11-resting", "box", 11, 2.0), ("window-12-resting", "window", 12, 1.5)]
+    out_all, out_judged = tmp_path / "all.json", tmp_path / "judged.json"
+    assert calibrate_verdict.main([str(_bench(tmp_path / "a", rows + high)),
+                                   "--write", str(out_all)]) == 0
+    assert calibrate_verdict.main([str(_bench(tmp_path / "b", rows + high,
+                                              unverifiable={h[0] for h in high})),
+                                   "--write", str(out_judged)]) == 0
+    assert "left out 2 unverifiable photo(s)" in capsys.readouterr().out
+    judged = calibration.load(out_judged)
+    assert judged.n == len(rows) and judged.source["unverifiable_left_out"] == 2
+    assert judged.line(0.05) == pytest.approx(
+        calibration.fit_tail([r[3] for r in rows]).line(0.05))
+    assert judged.line(0.05) < calibration.load(out_all).line(0.05)
 
 
 def test_the_statistics_are_computed_at_the_shipped_thresholds(tmp_path):
