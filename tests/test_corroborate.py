@@ -86,6 +86,25 @@ def test_cell_errors_take_the_second_best_totem_where_two_land_the_one_where_it_
     assert np.isnan(cell_errors(mu, land, grey)[0, 0])
 
 
+def test_on_the_values_a_brightened_square_is_seen_that_the_hue_forgives(plane):
+    photo = camera_view(Z_PLANE)
+    y0, x0 = int(0.4 * H), int(0.45 * W)
+    brighter = photo.copy()
+    brighter[y0:y0 + 30, x0:x0 + 30] = np.clip(0.25 + 1.5 * photo[y0:y0 + 30, x0:x0 + 30],
+                                               0.0, 1.0)
+    square = (slice(y0 + 10, y0 + 20), slice(x0 + 10, x0 + 20))
+    values = corroboration(*plane, photo, cell_px=CELL, n_slices=48, hue=False)
+    assert np.nanmedian(centre(values)) < 0.03          # the plane, brightness and all
+    seen = corroboration(*plane, brighter, cell_px=CELL, n_slices=48, hue=False)
+    assert np.nanmin(seen[square]) > 5 * np.nanpercentile(centre(values), 95)
+    hue = corroboration(*plane, brighter, cell_px=CELL, n_slices=48)
+    assert np.nanmax(hue[square]) < np.nanmin(seen[square]) / 3
+    # the rays brought to another exposure: the same photo at half the light
+    half = corroboration(*plane, photo, cell_px=CELL, n_slices=48, hue=False,
+                         gain=[0.5, 0.5, 0.5])
+    assert np.nanmedian(centre(half)) > 3 * np.nanmedian(centre(values))
+
+
 def test_unseen_forgives_a_misplaced_rebuilt_view_but_not_a_pasted_hue(plane):
     photo = camera_view(Z_PLANE)
     misplaced = photo[:, ::-1]          # a rebuilt view with everything in the wrong place

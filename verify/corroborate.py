@@ -108,16 +108,18 @@ def _sample(image_c, uu, vv):
 
 
 def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS,
-                alone: bool = True) -> np.ndarray:
+                alone: bool = True, hue: bool = True) -> np.ndarray:
     """``E`` per cell from the slice colours (see the module docstring).
 
     Parameters
     ----------
     mu : (n_tot, n_slices, nt, ns, 3) totems' sRGB colours per slice and cell.
     land : (n_tot, n_slices, nt, ns) bool, where each totem has rays.
-    photo_chroma : (nt, ns, 3) the photo's chroma at the cells.
+    photo_chroma : (nt, ns, 3) the photo's chroma at the cells (with ``hue`` False,
+        its sRGB values).
     min_totems : totems that must agree where several land.
     alone : a slice point one totem alone lands at is explained by it.
+    hue : compare chroma (the colour less its grey level); False: the values.
 
     Returns
     -------
@@ -125,8 +127,9 @@ def cell_errors(mu, land, photo_chroma, *, min_totems: int = MIN_TOTEMS,
     """
     mu = np.asarray(mu, np.float32)                # (totems, slices, cells): float32
     land = np.asarray(land, bool)
-    e = np.abs(mu - mu.mean(axis=-1, keepdims=True)
-               - np.asarray(photo_chroma, np.float32)[None, None]).mean(axis=-1)
+    if hue:
+        mu = mu - mu.mean(axis=-1, keepdims=True)
+    e = np.abs(mu - np.asarray(photo_chroma, np.float32)[None, None]).mean(axis=-1)
     e = np.where(land, e, np.inf)
     best = np.partition(e, min_totems - 1, axis=0)[min_totems - 1]   # (slices, cells)
     if alone:
@@ -139,7 +142,7 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
                   cell_px: float = CELL_PX, n_slices: int = N_SLICES,
                   sigma: float = SIGMA_CELLS, cos_evidence: float = COS_EVIDENCE,
                   min_totems: int = MIN_TOTEMS, photo_sigma=None,
-                  slices=None) -> np.ndarray:
+                  slices=None, hue: bool = True, gain=None) -> np.ndarray:
     """How far each photo pixel's hue is from what ``min_totems`` totems saw along its ray.
 
     Parameters
@@ -153,6 +156,10 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
         (the default).
     slices : :func:`ray_slices` of these rays with these settings, when already made
         (the evidence map reads the same).
+    hue : compare hues (chroma); False: the sRGB values, brightness included, the rays'
+        radiance first multiplied by ``gain``.
+    gain : (3,) linear gain per channel that brings the rays to the photo's exposure
+        (:mod:`verify.tone`); None: 1.
 
     Returns
     -------
@@ -165,23 +172,26 @@ def corroboration(rays: TotemRays, frame: FrustumFrame, image, *,
         return np.full((H, W), np.nan)
     res = map_res(frame, cell_px)
     sc = slices if slices is not None else ray_slices(
-        rays, frame, cell_px=cell_px, n_slices=n_slices, sigma=sigma)
+        rays, frame, cell_px=cell_px, n_slices=n_slices, sigma=sigma, gain=gain)
     splat_px = sigma * cell_px
-    blurred = blur_varying(chroma(image), splat_px if photo_sigma is None
+    blurred = blur_varying(chroma(image) if hue else image,
+                           splat_px if photo_sigma is None
                            else np.maximum(photo_sigma, splat_px))
     uu, vv = cell_centres(frame, res)
-    E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems)
+    E = cell_errors(sc.colour, sc.land, _sample(blurred, uu, vv), min_totems=min_totems,
+                    hue=hue)
     return cells_to_pixels(E, frame, (W, H))
 
 
 def ray_slices(rays: TotemRays, frame: FrustumFrame, *, cell_px: float = CELL_PX,
                n_slices: int = N_SLICES, sigma: float = SIGMA_CELLS,
-               cos_evidence: float = COS_EVIDENCE):
+               cos_evidence: float = COS_EVIDENCE, gain=None):
     """Each totem's mean sRGB colour per depth slice and cell of the map
     (:func:`inverse.sweep.slice_colours`), from its rays entering at an incidence cosine
-    of at least ``cos_evidence``."""
+    of at least ``cos_evidence``, their radiance times ``gain`` (3,) when given."""
     rays = rays.entering_at_least(cos_evidence)
-    colour = linear_to_srgb(np.clip(rays.radiance, 0.0, 1.0))
+    radiance = rays.radiance if gain is None else rays.radiance * np.asarray(gain, float)
+    colour = linear_to_srgb(np.clip(radiance, 0.0, 1.0))
     return slice_colours(rays.o, rays.d, colour, rays.totem, frame,
                          map_res(frame, cell_px), n_slices=n_slices, sigma=sigma)
 

@@ -38,7 +38,7 @@ METRIC_WORDS = {
     "L1": "colour difference from the re-rendered view (NeRF units: 2x sRGB)",
     "SSIM": "structural difference from the re-rendered view (1 - SSIM)",
     "CHROMA": "hues the re-rendered view shows nowhere nearby",
-    "RANGE": "colours, brightness included, outside the re-rendered view's range nearby",
+    "RANGE": "colours, brightness included, outside the re-rendered view's range nearby and unseen by the totems along the ray",
     "CORROB": "hues the totems' rays do not see along the pixel's ray (two where two reach)",
     "UNSEEN": "hues neither the re-rendered view nor the totems' rays show",
     "ABSENT": "hues three totems saw in front of the surface that the photo lacks",

@@ -96,7 +96,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     blurred = patches.blur_varying(image, resolution.photo_sigma(spacing))
     recon, tone_found = tone.match_gain(blurred, recon, judged)
     errors = _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
-                           spacing)
+                           spacing, gain=(tone_found or {}).get("gain"))
     heat = patches.heatmaps(errors, grid, valid=~totem_mask)
     keep = patches.patch_fraction(seen, grid) > 0
     where = metric_pixels(judged, seen, ev, judging)
@@ -148,12 +148,14 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
 
 
 def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
-                  spacing) -> dict:
+                  spacing, gain=None) -> dict:
     """Every metric's per-pixel map (:mod:`verify.patches`), CORROB and ABSENT from the
     totem rays when the fit has them (CORROB from ``slices``,
-    :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB; the photo
-    blurred to the rays' ``spacing`` (H, W) px (:mod:`verify.resolution`), as
-    ``blurred`` already is."""
+    :func:`verify.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB, RANGE
+    forgiven where the totems' rays, brought to the photo's exposure by the view's tone
+    ``gain`` (3,), see the photo's colour along the pixel's ray (as CORROB, on the
+    values); the photo blurred to the rays' ``spacing`` (H, W) px
+    (:mod:`verify.resolution`), as ``blurred`` already is."""
     hue = resolution.chroma_factor(getattr(scene, "jpeg", None))
     hue_sigma = resolution.photo_sigma(spacing, hue)
     errors = patches.pixel_errors(image, recon, sigma=resolution.photo_sigma(spacing),
@@ -163,6 +165,8 @@ def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
         frame = FrustumFrame.from_dict(fit.grid)
         errors["CORROB"] = corroborate.corroboration(rays, frame, image,
                                                      photo_sigma=hue_sigma, slices=slices)
+        errors["RANGE"] = corroborate.unseen(errors["RANGE"], corroborate.corroboration(
+            rays, frame, image, hue=False, gain=gain))
         errors["ABSENT"] = absence.absence(
             rays, frame, image, totem_mask, scene.K, getattr(fit, "recon_depth", None),
             centers=fit.centers, spacing=None if ev is None else ev.spacing,
