@@ -165,8 +165,8 @@ def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
         frame = FrustumFrame.from_dict(fit.grid)
         errors["CORROB"] = corroborate.corroboration(rays, frame, image,
                                                      photo_sigma=hue_sigma, slices=slices)
-        errors["RANGE"] = corroborate.unseen(errors["RANGE"], corroborate.corroboration(
-            rays, frame, image, hue=False, gain=gain))
+        values = corroborate.corroboration(rays, frame, image, hue=False, gain=gain)
+        errors["RANGE"] = np.fmin(np.asarray(errors["RANGE"], np.float64), values)
         errors["ABSENT"] = absence.absence(
             rays, frame, image, totem_mask, scene.K, getattr(fit, "recon_depth", None),
             centers=fit.centers, spacing=None if ev is None else ev.spacing,
