@@ -17,7 +17,10 @@ the shipped one: p-value below its alpha), prints:
 - per kind and channel, the mean patch AP of each judging metric;
 - per kind and preset, the AUC against that preset's untouched photos (where the
   statistic separates and where the preset's own scores swamp an edit), and the edits
-  caught at the verdict's line (an unverifiable edit is missed).
+  caught at the verdict's line (an unverifiable edit is missed);
+- per kind, the edits caught by how much of the edit the totems establish (the share
+  of its pixels the verdict judges, ``metrics.manip_judged``): what a user may expect
+  of an edit inside the report's judged region, and what lies outside it.
 
 ``--thresholds RANGE=T,UNSEEN=T,ABSENT=T`` judges the runs at other thresholds than
 those they were verified at, from each run's per-metric scores (:func:`rejudge`; the
@@ -184,7 +187,8 @@ def tables(rows: list[dict], cal) -> str:
             out.append(f"| {kind} | {ch} | {_rate(_called(r) for r in rs)} "
                        f"| {_rate(r['statistic'] > line for r in rs)} | "
                        f"{auc} | " + " | ".join(aps) + " |")
-    return "\n".join(out + [""] + _by_preset(untouched, edited))
+    return "\n".join(out + [""] + _by_preset(untouched, edited) + [""]
+                     + by_coverage(edited))
 
 
 def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
@@ -211,6 +215,32 @@ def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
                     and r.get("channel", "pristine") == ch]
             cells.append(f"{sum(mine)} of {len(mine)}" if mine else "–")
         out.append(f"| {kind} {ch} | " + " | ".join(cells) + " |")
+    return out
+
+
+COVERAGE_BINS = (0.0, 0.25, 0.5, 1.0)
+"""Edges of the bins of an edit's judged share (the last bin holds 1)."""
+
+
+def by_coverage(edited: list[dict]) -> list[str]:
+    """Markdown rows: per kind, the edits caught at the verdict's line in each bin of
+    the share of the edit's pixels the verdict judged (``metrics.manip_judged``; an
+    edit with no judged share is left out), with the binomial interval."""
+    edges = COVERAGE_BINS
+    names = [f"{100 * lo:g}-{100 * hi:g} % judged" if hi < 1 else f"{100 * lo:g} % or more"
+             for lo, hi in zip(edges[:-1], edges[1:])]
+    out = ["| caught, by the share of the edit judged | " + " | ".join(names) + " |",
+           "|---|" + "---|" * len(names)]
+    for kind in sorted({r["kind"] for r in edited}):
+        share = [((r.get("metrics") or {}).get("manip_judged"), r) for r in edited
+                 if r["kind"] == kind]
+        share = [(float(j), r) for j, r in share if j is not None]
+        cells = []
+        for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+            last = i == len(edges) - 2
+            cells.append(_rate(_called(r) for j, r in share
+                               if lo <= j and (j < hi or (last and j <= hi))))
+        out.append(f"| {kind} | " + " | ".join(cells) + " |")
     return out
 
 

@@ -99,3 +99,18 @@ def test_parse_thresholds_refuses_an_unknown_metric_or_a_threshold_not_above_zer
     for bad in ("L1=0.3", "RANGE=0", "RANGE=x", "RANGE"):
         with pytest.raises(SystemExit):
             roc.parse_thresholds(bad)
+
+
+def test_edits_caught_by_the_share_of_the_edit_judged():
+    def run(judged, verdict):
+        return {"kind": "color", "verdict": verdict, "metrics": {"manip_judged": judged}}
+    edited = [run(0.0, "consistent"), run(0.1, "inconsistent"), run(0.3, "consistent"),
+              run(0.6, "inconsistent"), run(1.0, "inconsistent"), run(None, "consistent"),
+              {"kind": "splice", "verdict": "consistent", "metrics": {"manip_judged": 0.5}}]
+    header, _, color, splice = roc.by_coverage(edited)
+    assert header.split(" | ")[1:] == ["0-25 % judged", "25-50 % judged",
+                                       "50 % or more |"]
+    cells = color.split(" | ")[1:]
+    assert cells[0].startswith("1 of 2") and cells[1].startswith("0 of 1")
+    assert cells[2].startswith("2 of 2")            # 1.0 falls in the last bin
+    assert splice.split(" | ")[1:][2].startswith("0 of 1") and "–" in splice
