@@ -227,20 +227,19 @@ def by_coverage(edited: list[dict]) -> list[str]:
     the share of the edit's pixels the verdict judged (``metrics.manip_judged``; an
     edit with no judged share is left out), with the binomial interval."""
     edges = COVERAGE_BINS
+    n_bins = len(edges) - 1
     names = [f"{100 * lo:g}-{100 * hi:g} % judged" if hi < 1 else f"{100 * lo:g} % or more"
              for lo, hi in zip(edges[:-1], edges[1:])]
     out = ["| caught, by the share of the edit judged | " + " | ".join(names) + " |",
-           "|---|" + "---|" * len(names)]
+           "|---|" + "---|" * n_bins]
     for kind in sorted({r["kind"] for r in edited}):
-        share = [((r.get("metrics") or {}).get("manip_judged"), r) for r in edited
-                 if r["kind"] == kind]
-        share = [(float(j), r) for j, r in share if j is not None]
-        cells = []
-        for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-            last = i == len(edges) - 2
-            cells.append(_rate(_called(r) for j, r in share
-                               if lo <= j and (j < hi or (last and j <= hi))))
-        out.append(f"| {kind} | " + " | ".join(cells) + " |")
+        by_bin = [[] for _ in range(n_bins)]
+        for r in edited:
+            judged = (r.get("metrics") or {}).get("manip_judged")
+            if r["kind"] == kind and judged is not None:
+                i = int(np.searchsorted(edges, float(judged), side="right")) - 1
+                by_bin[min(i, n_bins - 1)].append(_called(r))
+        out.append(f"| {kind} | " + " | ".join(_rate(b) for b in by_bin) + " |")
     return out
 
 
