@@ -80,10 +80,34 @@ def _one_shader(name: str, node: str, output: str, **inputs):
 
 def _glass(ior: float, kind: str = "glass"):
     """The totems' sharp dielectric: Cycles' Glass BSDF (Fresnel-weighted reflection and
-    refraction), or with ``kind`` "refraction" the Refraction BSDF alone (no reflection
-    of the environment, the transmitted light not dimmed by Fresnel; ablations)."""
+    refraction); for ablations, ``kind`` "refraction", the Refraction BSDF alone (no
+    reflection of the environment, the transmitted light not dimmed by Fresnel), or
+    "coated", the Glass BSDF without its reflection (the refraction weighted by one
+    minus the Fresnel reflectance, as the fit's key assumes; an ideal anti-reflective
+    coating that absorbs what uncoated glass would reflect)."""
+    if kind == "coated":
+        return _coated(ior)
     node = {"glass": "ShaderNodeBsdfGlass", "refraction": "ShaderNodeBsdfRefraction"}[kind]
     return _one_shader("totem_glass", node, "BSDF", IOR=ior, Roughness=0.0)
+
+
+def _coated(ior: float):
+    """``mix(refraction, black, Fresnel(ior))``: Cycles' Fresnel node takes ``1 / ior``
+    on the inside, so both surfaces dim the light as the Glass BSDF's do."""
+    mat = _one_shader("totem_glass", "ShaderNodeBsdfRefraction", "BSDF", IOR=ior,
+                      Roughness=0.0)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    refraction = nodes["Refraction BSDF"]
+    fresnel = nodes.new("ShaderNodeFresnel")
+    fresnel.inputs["IOR"].default_value = ior
+    black = nodes.new("ShaderNodeEmission")
+    black.inputs["Strength"].default_value = 0.0
+    mix = nodes.new("ShaderNodeMixShader")
+    links.new(fresnel.outputs["Fac"], mix.inputs["Fac"])
+    links.new(refraction.outputs["BSDF"], mix.inputs[1])
+    links.new(black.outputs["Emission"], mix.inputs[2])
+    links.new(mix.outputs["Shader"], nodes["Material Output"].inputs["Surface"])
+    return mat
 
 
 def _emitter(strength: float):

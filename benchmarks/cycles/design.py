@@ -24,7 +24,7 @@ SHAPES = ("cube", "cylinder", "cone", "torus", "ico", "monkey")
 TEXTURES = ("checker", "noise", "brick", "wave", "voronoi", "magic", "plain")
 VIEWS = ("AgX", "Filmic", "Standard")
 FILTERS = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
-GLASSES = ("glass", "refraction")
+GLASSES = ("glass", "refraction", "coated")
 VIEW_WHITE = {"Standard": 1.0, "AgX": 0.18 * 2**4.026, "Filmic": 0.18 * 2**6.5}
 """The scene-linear value each view transform shows as white (Blender's OCIO config:
 Standard clips at 1, AgX's range ends 4.03 stops and Filmic's 6.5 stops above 0.18)."""
@@ -66,7 +66,9 @@ def scene_options(ap) -> None:
                     help="the pixel filter's width in pixels (ablations)")
     ap.add_argument("--glass", choices=GLASSES,
                     help="the totems' BSDF: Cycles' Glass (reflects and refracts; the "
-                         "default) or Refraction alone (no reflection; ablations)")
+                         "default), Refraction alone (no reflection, no Fresnel "
+                         "dimming) or coated (the Glass without its reflection; "
+                         "ablations)")
     ap.add_argument("--totem-shadows", choices=("on", "off"),
                     help="off: the totems hidden from shadow and diffuse rays, so they "
                          "cast no shadow and no caustic (ablations; default on)")

@@ -4,7 +4,7 @@
         [--kind room|yard|table] [--small | --size WxH] [--samples S]
         [--edits color,splice] [--no-remove] [--view AgX|Filmic|Standard]
         [--denoise on|off] [--filter BOX|GAUSSIAN|BLACKMAN_HARRIS] [--filter-width PX]
-        [--glass glass|refraction] [--totem-shadows on|off]
+        [--glass glass|refraction|coated] [--totem-shadows on|off]
 
 For K seeds from N (a seed whose totems cannot be placed is skipped, and said so), it
 renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;

@@ -4,7 +4,7 @@
         [--kind room|yard|table] [--size WxH | --small] [--samples N] [--remove]
         [--linear] [--no-clean] [--view AgX|Filmic|Standard] [--denoise on|off]
         [--filter BOX|GAUSSIAN|BLACKMAN_HARRIS] [--filter-width PX]
-        [--glass glass|refraction] [--totem-shadows on|off]
+        [--glass glass|refraction|coated] [--totem-shadows on|off]
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --desc DESC.json [...]
 
 Writes OUT/: photo.png (the camera's photo: its view transform, denoiser and pixel
