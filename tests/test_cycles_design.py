@@ -38,6 +38,7 @@ def test_each_switch_changes_what_it_names_only():
             if k not in ("view_transform", "denoise", "filter", "filter_width")}
     assert rest == {k: v for k, v in desc["pipeline"].items() if k in rest}
     assert out["totems"] == desc["totems"] and out["camera"] == desc["camera"]
+    assert design.ablate(desc, _args("--glass", "coated"))["glass"] == "coated"
 
 
 def test_filter_width_must_be_positive():

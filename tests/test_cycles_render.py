@@ -117,24 +117,32 @@ def test_small_set_is_scene_folders(tmp_path):
 
 def test_ablation_switches_reach_blender():
     """``--glass refraction`` gives the totems a Refraction BSDF, ``--totem-shadows off``
-    hides them from shadow and diffuse rays; by default Glass, and seen by every ray."""
+    hides them from shadow and diffuse rays; by default Glass, and seen by every ray;
+    ``--glass coated`` the refraction mixed with black by the Fresnel reflectance."""
     code = (
         "import sys, json; sys.path.insert(0, sys.argv[1]); import blender_scene as bs\n"
         "d = json.loads(sys.argv[2]); out = []\n"
-        "for glass, shadows in ((None, None), ('refraction', False)):\n"
+        "for glass, shadows in ((None, None), ('refraction', False), ('coated', None)):\n"
         "    e = dict(d); e.update({k: v for k, v in (('glass', glass),\n"
         "        ('totem_shadows', shadows)) if v is not None})\n"
         "    t = bs.build(e)['totems'][0]\n"
         "    mat = [n for n in t.modifiers[0].node_group.nodes\n"
         "           if n.bl_idname == 'GeometryNodeSetMaterial'][0].inputs['Material']\n"
         "    names = [n.bl_idname for n in mat.default_value.node_tree.nodes]\n"
-        "    out.append([names, t.visible_shadow, t.visible_diffuse, t.visible_glossy])\n"
+        "    links = sorted((l.from_node.bl_idname, l.to_node.bl_idname, l.to_socket.identifier)\n"
+        "                   for l in mat.default_value.node_tree.links)\n"
+        "    out.append([names, t.visible_shadow, t.visible_diffuse, t.visible_glossy, links])\n"
         "print(json.dumps(out))\n")
     r = subprocess.run([str(PY), "-c", code, str(ROOT / "benchmarks" / "cycles"),
                         json.dumps(_desc())], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
-    default, ablated = json.loads(r.stdout.strip().splitlines()[-1])
-    assert "ShaderNodeBsdfGlass" in default[0] and default[1:] == [True, True, True]
+    default, ablated, coated = json.loads(r.stdout.strip().splitlines()[-1])
+    assert "ShaderNodeBsdfGlass" in default[0] and default[1:4] == [True, True, True]
     assert "ShaderNodeBsdfRefraction" in ablated[0] and "ShaderNodeBsdfGlass" not in \
         ablated[0]
-    assert ablated[1:] == [False, False, True]              # other totems still seen
+    assert ablated[1:4] == [False, False, True]             # other totems still seen
+    assert "ShaderNodeBsdfGlass" not in coated[0] and coated[1:4] == [True, True, True]
+    assert ["ShaderNodeFresnel", "ShaderNodeMixShader", "Fac"] in coated[4]
+    assert ["ShaderNodeBsdfRefraction", "ShaderNodeMixShader", "Shader"] in coated[4]
+    assert ["ShaderNodeEmission", "ShaderNodeMixShader", "Shader_001"] in coated[4]
+    assert ["ShaderNodeMixShader", "ShaderNodeOutputMaterial", "Surface"] in coated[4]
