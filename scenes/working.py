@@ -1,12 +1,13 @@
 """The working resolution: a photo larger than :data:`WORKING_PIXELS` is fitted and
-judged at an integer fraction of its size.
+judged at the integer fraction of its size that comes nearest it.
 
-A phone's 12 Mpx photo holds no more evidence than its totems' rays resolve, and the
-verdict already compares the photo at that resolution (:mod:`verify.resolution`): a
-totem ray lands every few pixels of a 640 x 480 view, so a larger photo only multiplies
-the cost. ``check``, ``fit`` and ``verify`` read a scene folder, then take the
-:func:`working_scene` of it: the photo averaged over ``f x f`` blocks (``f`` the smallest
-integer that brings it under the limit), the masks as the blocks they cover at least
+The verdict's line was calibrated on 640 x 480 photos, and its patches, map cells and
+blurs are sized in pixels: the same scene judged at 1280 x 960 scores untouched about
+half as high again (see docs/decisions.md, "working: every photo judged at the size the
+verdict was calibrated at"). Nor does a larger photo hold more evidence: a totem ray
+lands every few pixels of a 640 x 480 view (:mod:`verify.resolution`). ``check``,
+``fit`` and ``verify`` read a scene folder, then take the :func:`working_scene` of it:
+the photo averaged over ``f x f`` blocks, the masks as the blocks they cover at least
 half of, ``K`` for the coarser pixels (OpenCV centres: ``u' = (u + 0.5) / f - 0.5``).
 The verify outputs are then at the working size and say the factor
 (``report.json`` ``working_scale``).
@@ -24,17 +25,22 @@ from scenes.folder import Scene, Truth, read_scene
 __all__ = ["WORKING_PIXELS", "working_factor", "scale_intrinsics", "block_mean",
            "working_scene", "working_truth", "read_working_scene"]
 
-WORKING_PIXELS = 1280 * 960
-"""The most pixels a photo is fitted and judged at."""
+WORKING_PIXELS = 640 * 480
+"""The pixels a photo is fitted and judged at, as near as an integer fraction of its size
+comes: the size the verdict's line was calibrated at."""
 
 
-def working_factor(size, max_pixels: int = WORKING_PIXELS) -> int:
-    """The smallest integer ``f`` with ``(W / f) * (H / f) <= max_pixels``; ``size`` (W, H)."""
+def working_factor(size, pixels: int = WORKING_PIXELS) -> int:
+    """The integer ``f`` for which ``(W // f) * (H // f)`` is nearest ``pixels`` in ratio
+    (the smaller ``f`` on a tie); 1 for a photo of at most ``pixels``. ``size`` (W, H)."""
     W, H = size
-    f = max(1, math.ceil(math.sqrt(W * H / max_pixels)))
-    while (W // f) * (H // f) > max_pixels:
+    if W * H <= pixels:
+        return 1
+    f = 1
+    while (W // (f + 1)) * (H // (f + 1)) >= pixels:
         f += 1
-    return f
+    over, under = (W // f) * (H // f), (W // (f + 1)) * (H // (f + 1))
+    return f if under <= 0 or over * under <= pixels * pixels else f + 1
 
 
 def scale_intrinsics(K, f: int) -> np.ndarray:
@@ -55,15 +61,15 @@ def block_mean(a, f: int) -> np.ndarray:
     return a.reshape(H // f, f, W // f, f, *a.shape[2:]).mean(axis=(1, 3))
 
 
-def working_scene(scene: Scene, max_pixels: int = WORKING_PIXELS) -> Scene:
-    """``scene`` at the working resolution (itself when it is not over ``max_pixels``).
+def working_scene(scene: Scene, pixels: int = WORKING_PIXELS) -> Scene:
+    """``scene`` at the working resolution (itself when :func:`working_factor` is 1).
 
     The image is block-averaged (sRGB values, as a camera's downscale does), each mask
     keeps the blocks it covers at least half of, the manipulation mask those it touches
     at all; the JPEG record is dropped (its 8 px blocks and chroma subsampling are
     averaged away). ``scale`` says the factor.
     """
-    f = working_factor(scene.size, max_pixels)
+    f = working_factor(scene.size, pixels)
     if f == 1:
         return scene
     masks = np.stack([block_mean(m, f) >= 0.5 for m in np.asarray(scene.masks, bool)])
@@ -79,12 +85,12 @@ def read_working_scene(path) -> Scene:
     return working_scene(read_scene(path))
 
 
-def working_truth(truth: Truth | None, max_pixels: int = WORKING_PIXELS) -> Truth | None:
+def working_truth(truth: Truth | None, pixels: int = WORKING_PIXELS) -> Truth | None:
     """``truth`` with its clean view at the working resolution of a photo its size."""
     if truth is None:
         return None
     clean = np.asarray(truth.clean)
-    f = working_factor((clean.shape[1], clean.shape[0]), max_pixels)
+    f = working_factor((clean.shape[1], clean.shape[0]), pixels)
     if f == 1:
         return truth
     return dataclasses.replace(truth, clean=block_mean(clean, f).astype(np.float32))

@@ -168,9 +168,9 @@ def test_a_square_one_totem_sees_is_not_judged_and_the_report_says_so(
     assert "Unverifiable" in page
 
 
-def _enlarged(src, out, f: int = 5):
+def _enlarged(src, out, f: int = 4):
     """A copy of the scene folder ``src`` with every pixel repeated f x f (a photo over
-    the working size: 1600 x 1200 from 320 x 240), K for those pixels."""
+    the working size: 1280 x 960 from 320 x 240), K for those pixels."""
     from scenes.working import scale_intrinsics
 
     s = folder.read_scene(src)
@@ -193,10 +193,10 @@ def test_a_photo_over_the_working_size_is_judged_at_a_fraction_of_it(scene, tamp
         report = json.loads((out / "verify" / "report.json").read_text())
         assert report["working_scale"] == 2
         recon = folder.read_image(out / "verify" / "recon.png")
-        assert recon.shape == (600, 800, 3)
-        assert folder.read_image(big / "image.png").shape == (1200, 1600, 3)   # untouched
+        assert recon.shape == (480, 640, 3)                          # as calibrated
+        assert folder.read_image(big / "image.png").shape == (960, 1280, 3)    # untouched
         if code:
-            x0, y0, x1, y1 = (2.5 * np.array(SQUARE)).astype(int)   # at the working size
+            x0, y0, x1, y1 = (2 * np.array(SQUARE)).astype(int)     # at the working size
             hit = [d for d in report["drivers"]
                    if d["box"][0] < x1 and d["box"][2] > x0 and d["box"][1] < y1
                    and d["box"][3] > y0]

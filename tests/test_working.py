@@ -14,16 +14,18 @@ from scenes.working import (WORKING_PIXELS, block_mean, scale_intrinsics, workin
                             working_scene, working_truth)
 
 
-def test_the_factor_is_the_smallest_that_brings_the_photo_under_the_limit():
-    assert WORKING_PIXELS == 1280 * 960
+def test_the_factor_brings_the_photo_nearest_the_calibrated_size():
+    assert WORKING_PIXELS == 640 * 480
     assert working_factor((640, 480)) == 1
-    assert working_factor((1280, 960)) == 1
-    assert working_factor((1281, 960)) == 2
-    assert working_factor((4000, 3000)) == 4          # 3 would leave 1333 x 1000
-    for W, H in [(4000, 3000), (4032, 3024), (6000, 4000), (1921, 1081)]:
+    assert working_factor((320, 240)) == 1                 # never enlarged
+    assert working_factor((800, 600)) == 1                 # 1.56x nearer than 0.39x
+    assert working_factor((1280, 960)) == 2
+    assert working_factor((1024, 768)) == 2                # 0.64x nearer than 2.56x
+    assert working_factor((4000, 3000)) == 6               # 666 x 500; 7 leaves 571 x 428
+    for W, H in [(4000, 3000), (4032, 3024), (6000, 4000), (1921, 1081), (1000, 700)]:
         f = working_factor((W, H))
-        assert (W // f) * (H // f) <= WORKING_PIXELS < (W // (f - 1)) * (H // (f - 1)) \
-            or f == 1
+        ratio = lambda g: abs(np.log((W // g) * (H // g) / WORKING_PIXELS))  # noqa: E731
+        assert all(ratio(f) <= ratio(g) for g in range(1, 12) if (W // g) * (H // g) > 0)
 
 
 def test_a_known_point_lands_on_its_coarse_pixel():
@@ -53,22 +55,22 @@ def _upsampled(f: int):
 
 def test_an_upsampled_photo_comes_back_to_its_own_pixels():
     scene, image, masks = _upsampled(3)
-    work = working_scene(scene, max_pixels=vc.W * vc.H)
+    work = working_scene(scene, pixels=vc.W * vc.H)
     assert work.scale == 3 and work.size == (vc.W, vc.H)
     assert np.allclose(work.image, image, atol=1e-6)
     assert np.array_equal(work.masks, masks)
     assert np.array_equal(work.manip_mask, masks[0])
     assert np.allclose(work.K, vc.K)
     assert work.jpeg is None
-    assert working_scene(work, max_pixels=vc.W * vc.H) is work        # already there
+    assert working_scene(work, pixels=vc.W * vc.H) is work        # already there
     small = dataclasses.replace(scene, image=image, K=vc.K, masks=masks, manip_mask=None)
-    assert working_scene(small, max_pixels=vc.W * vc.H) is small
+    assert working_scene(small, pixels=vc.W * vc.H) is small
 
 
 def test_the_truth_follows_the_photo():
     clean = np.kron(vc.texture(1), np.ones((2, 2, 1))).astype(np.float32)
     truth = folder.Truth(clean=clean, totem_pose=vc.CENTERS, scene={})
-    work = working_truth(truth, max_pixels=vc.W * vc.H)
+    work = working_truth(truth, pixels=vc.W * vc.H)
     assert work.clean.shape == (vc.H, vc.W, 3)
     assert np.allclose(work.clean, vc.texture(1), atol=1e-6)
     assert np.array_equal(work.totem_pose, vc.CENTERS)
