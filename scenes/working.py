@@ -16,7 +16,6 @@ The verify outputs are then at the working size and say the factor
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
