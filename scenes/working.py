@@ -1,14 +1,13 @@
 """The working resolution: a photo larger than :data:`WORKING_PIXELS` is fitted and
 judged at the integer fraction of its size that comes nearest it.
 
-The verdict's line was calibrated on 640 x 480 photos, and its patches, map cells and
-blurs are sized in pixels: the same scene judged at 1280 x 960 scores untouched about
-half as high again (see docs/decisions.md, "working: every photo judged at the size the
-verdict was calibrated at"). Nor does a larger photo hold more evidence: a totem ray
-lands every few pixels of a 640 x 480 view (:mod:`verify.resolution`). ``check``,
-``fit`` and ``verify`` read a scene folder, then take the :func:`working_scene` of it:
-the photo averaged over ``f x f`` blocks, the masks as the blocks they cover at least
-half of, ``K`` for the coarser pixels (OpenCV centres: ``u' = (u + 0.5) / f - 0.5``).
+The verdict's line was calibrated on 640 x 480 photos and its patches, map cells and
+blurs are sized in pixels, so a photo is judged at about that size (see
+docs/decisions.md, "working: every photo judged at the size the verdict was calibrated
+at"). ``check``, ``fit`` and ``verify`` read a scene folder, then take the
+:func:`working_scene` of it: the photo averaged over ``f x f`` blocks, the masks as
+the blocks they cover at least half of, ``K`` for the coarser pixels (OpenCV centres:
+``u' = (u + 0.5) / f - 0.5``).
 The verify outputs are then at the working size and say the factor
 (``report.json`` ``working_scale``).
 """
