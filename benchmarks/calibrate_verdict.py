@@ -2,19 +2,19 @@
 
     python benchmarks/make_set.py --set calibration --out CAL --jobs 2
     totems bench CAL --out BENCH --jobs 2 --no-table1      # or --reverify after verify/
-    python benchmarks/calibrate_verdict.py BENCH... [--write verify/calibration.json]
+    python benchmarks/calibrate_verdict.py BENCH... [--write verify/verdict/calibration.json]
         [--set development --skip-edited] [--line-at 0.05] [--per-metric 0.9]
 
 Reads every untouched photo's per-metric scores (``report.json`` ``scores``) from benches
 of the calibration set, leaves out those the verdict called unverifiable (never called
 inconsistent, they are no false alarm the line must hold back; docs/decisions.md,
 "verdict: calibrated on the photos it judges"), and computes the statistic at
-``verify/verdict.py``'s thresholds
+``verify/verdict/verdict.py``'s thresholds
 (so a change of thresholds is calibrated without checking the photos again; a report
 without scores keeps its ``statistic``), refuses photos that are manipulated or whose
 seed belongs to another set (``benchmarks/sets.py``: a figure is never reported on what
-it was calibrated on), fits the tail (``verify.calibration.fit_tail``) and prints the line,
-the statistics per preset and per channel, the false alarms at ``ALPHA`` when each
+it was calibrated on), fits the tail (``verify.verdict.calibration.fit_tail``) and prints
+the line, the statistics per preset and per channel, the false alarms at ``ALPHA`` when each
 preset (and each channel) is held out, with 95 % intervals, and where the line at
 ``--line-at`` (default ``LINE_AT``) would fall without each (how far it pulls the line).
 ``--write`` stores the calibration the package ships.
@@ -22,7 +22,7 @@ preset (and each channel) is held out, with 95 % intervals, and where the line a
 ``--per-metric Q`` (with ``--line-at P``) chooses the thresholds themselves: each
 metric's at the ``Q`` quantile of its untouched scores, all times one factor that puts
 the line at p = P (:func:`per_metric_thresholds`); the statistics are then those at
-these thresholds (rounded as shipped), which ``verify/verdict.py`` must be given.
+these thresholds (rounded as shipped), which ``verify/verdict/verdict.py`` must be given.
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ import sets  # noqa: E402
 
 from scenes import folder  # noqa: E402
 from scenes.errors import BadInput  # noqa: E402
-from verify import calibration  # noqa: E402
-from verify.verdict import THRESHOLDS  # noqa: E402
+from verify.verdict import calibration  # noqa: E402
+from verify.verdict.verdict import THRESHOLDS  # noqa: E402
 
 LINE_AT = 0.05
 """The p-value the verdict's line (score 1) is put at (docs/decisions.md, 'verdict: the
@@ -88,7 +88,7 @@ def metric_scores(report: dict) -> dict:
 
 def statistic_at(scores: dict, thresholds: dict) -> float:
     """The verdict's statistic at ``thresholds``: the largest score over its threshold,
-    0 where no metric judged (as :func:`verify.verdict.decide`)."""
+    0 where no metric judged (as :func:`verify.verdict.verdict.decide`)."""
     return max((s / thresholds[m] for m, s in scores.items()), default=0.0)
 
 
@@ -185,7 +185,8 @@ def main(argv=None) -> int:
     p.add_argument("bench", type=Path, nargs="+",
                    help="output folders of `totems bench` on the set")
     p.add_argument("--write", type=Path, default=None,
-                   help="write the calibration here (the package's: verify/calibration.json)")
+                   help="write the calibration here "
+                        "(the package's: verify/verdict/calibration.json)")
     p.add_argument("--set", default="calibration", choices=sorted(sets.SEEDS),
                    help="the set the photos belong to (default calibration; another set "
                         "gives an interim calibration, named so in its source)")
@@ -235,7 +236,7 @@ def main(argv=None) -> int:
     if args.per_metric is not None:
         print("thresholds " + ", ".join(f"{m} {v:.3f}" for m, v in chosen.items())
               + f" (each metric's {args.per_metric:g} quantile, one factor; the line at "
-              f"p = {cal.p_value(1.0):.3f}); verify/verdict.py's: "
+              f"p = {cal.p_value(1.0):.3f}); verify/verdict/verdict.py's: "
               + ", ".join(f"{m} {v:.3f}" for m, v in THRESHOLDS.items()))
     elif args.line_at is not None:
         print(f"thresholds x {cal.line(args.line_at):.4f} put the line at p = {args.line_at}")

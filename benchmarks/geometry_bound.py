@@ -7,7 +7,7 @@ For each untouched scene of SET with ground truth, and its ``joint`` run in BENC
 (``totems bench``), prints the recon L1 of the run and of the true-depth splat, both
 over the run's protected region (totem pixels excluded): the first minus the second is
 what the fit's geometry costs; the second is what the totems' sampling allows with
-this simple splat (:func:`inverse.splat.splat_image`, linear between the rays'
+this simple splat (:func:`inverse.view.splat.splat_image`, linear between the rays'
 pixels). The third column is how bright the totem rays are against the truth where
 they meet the surface the camera sees (mean sRGB of the rays over the truth's there,
 the glass's reflection taken off as the fit starts):
@@ -33,12 +33,12 @@ def true_depth_view(scene, truth, desc) -> tuple[np.ndarray, float, np.ndarray]:
     mean sRGB over the rays that meet it inside the image), and the view splatted the
     same way from the truth's colours at the pixels those rays meet."""
     from inverse import sphere
-    from inverse.rays import totem_pixels
     from inverse.grid import frame_for_scene
-    from inverse.splat import _pixels, splat_image, surface_hits
+    from inverse.rays import totem_pixels
+    from inverse.view.splat import _pixels, splat_image, surface_hits
     from scenes import backend
     from scenes.colour import linear_to_srgb, srgb_to_linear
-    from scenes.render import depth_map
+    from scenes.synthetic.render import depth_map
 
     mi = backend.modules()[1]
 

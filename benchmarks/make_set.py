@@ -7,9 +7,10 @@
         [--totems-study] [--presets box,envmap] [--kinds K,..] [--jobs N] [--dry-run]
 
 Layout: OUT/<preset>-<seed>/ (untouched), OUT/<preset>-<seed>-<kind>/ (manipulated),
-OUT/<name>+<channel>/ (recaptured through ``scenes.recapture``), OUT/<preset>-<seed>-
-<n>totems/ (the totems study). Without ``--set``, the standard set: box and envmap
-seeds 1-5 (``--seeds``, ``--first-seed``), untouched and every manipulation, pristine.
+OUT/<name>+<channel>/ (recaptured through ``scenes.channel.recapture``),
+OUT/<preset>-<seed>-<n>totems/ (the totems study). Without ``--set``, the standard set: box
+and envmap seeds 1-5 (``--seeds``, ``--first-seed``), untouched and every manipulation,
+pristine.
 --small: 320x240 and the first 2 seeds of each preset, for a quick run.
 --totems-study: also box scenes with 2 and 6 totems (the supplementary's study).
 --presets, --kinds, --channels keep only those (``--kinds ""``: untouched photos only).
@@ -39,8 +40,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import sets
 
 from scenes.errors import BadInput
-from scenes.make import make_scene
-from scenes.tamper import KINDS, tamper
+from scenes.synthetic.make import make_scene
+from scenes.tamper.tamper import KINDS, tamper
 
 # Seconds per task at 640x480, 64 spp, on this machine's 2 cores: seed 1 of each preset
 # made and edited beside a benchmark run (make: box 51 s, envmap 19, outdoor 19,
@@ -156,10 +157,10 @@ def recapture_one(out: str, photo) -> str:
 
 
 def recapture(src: Path, dst: Path, channel: str, *, seed: int) -> None:
-    """The hook to ``scenes.recapture``: ``src`` through the channel named ``channel``
-    (``sets.CHANNELS``), its noise seeded by ``seed``, written at ``dst``."""
-    from scenes.channel import Channel
-    from scenes.recapture import recapture as run
+    """The hook to ``scenes.channel.recapture``: ``src`` through the channel named
+    ``channel`` (``sets.CHANNELS``), its noise seeded by ``seed``, written at ``dst``."""
+    from scenes.channel.channel import Channel
+    from scenes.channel.recapture import recapture as run
 
     run(src, dst, Channel(**sets.CHANNELS[channel], seed=int(seed)))
 

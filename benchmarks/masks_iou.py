@@ -3,7 +3,7 @@
     python benchmarks/masks_iou.py SCENE... [--jpeg Q] [--hints] [--without-glass]
 
 For each synthetic scene folder, the masks are proposed the way ``totems masks`` does
-(``scenes.detect_masks.find_totems`` with the camera's K and the key's IoR; as many as
+(``scenes.photo.detect_masks.find_totems`` with the camera's K and the key's IoR; as many as
 the key lists, those whose score reaches ``MIN_KEYED``, or ``--n`` = the true count
 when the key gives one radius for all), matched to the true masks (``totem_masks/``,
 rendered) by the largest total IoU, and each true totem's IoU printed (0 when it was
@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from scenes import detect_masks, folder
+from scenes import folder
+from scenes.photo import detect_masks
 
 GOOD_IOU = 0.95
 FOUND_IOU = 0.5     # a mask at least this close to a totem is on it, however imprecise

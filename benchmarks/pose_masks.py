@@ -1,11 +1,11 @@
 """Totem poses from masks drawn the way people draw them: from the mask alone, from the
-photo's rim (``inverse.rim``) and from both weighed (``inverse.pose_combined``, the
+photo's rim (``inverse.pose.rim``) and from both weighed (``inverse.pose.combined``, the
 default), against the truth.
 
     python benchmarks/pose_masks.py SCENE... [--families a,b] [--seed N] [--jpeg Q]
 
 For each synthetic scene folder (with ``truth/totem_pose.npy``) and each mask family of
-``scenes.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
+``scenes.photo.drawn_masks`` (also ``exact``: the rendered masks, and ``auto``: the masks
 ``totems masks`` proposes), prints the pose error as a percentage of the totem's
 distance, median and worst, for the mask's own pose, the photo's rim and the two weighed
 (each photo's totems pooled, as ``totems fit`` does), and how often the weighed pose's
@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from inverse import pose, pose_combined, rim
+from inverse.pose import pose, combined, rim
 from scenes import silhouette
-from scenes import drawn_masks, folder
+from scenes import folder
 from scenes.errors import BadInput
+from scenes.photo import drawn_masks
 
 
 def photo(scene, jpeg: int | None) -> np.ndarray:
@@ -48,7 +49,7 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
     out = {}
     for name in families:
         if name == "auto":
-            from scenes.detect_masks import propose_masks
+            from scenes.photo.detect_masks import propose_masks
 
             try:
                 masks = propose_masks(img, n=scene.n_totems, K=K)
@@ -63,10 +64,10 @@ def errors(scene_dir: Path, families, rng, jpeg=None) -> dict:
         for j, m in enumerate(masks):
             try:
                 pose.initial_pose(m[None], K, R[j])
-                evidence.append(pose_combined.totem_evidence(m, R[j], K, grad, j=j))
+                evidence.append(combined.totem_evidence(m, R[j], K, grad, j=j))
             except BadInput:
                 evidence.append(None)
-        weighed = pose_combined.weigh_photo(evidence, R, K, grad)
+        weighed = combined.weigh_photo(evidence, R, K, grad)
         rows = []
         for j, (ev, c) in enumerate(zip(evidence, weighed)):
             if ev is None:

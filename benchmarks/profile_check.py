@@ -36,36 +36,36 @@ ROOT = Path(__file__).resolve().parents[1]
 #: (module, function) pairs timed, in the order a check calls them.
 STAGES = [
     ("scenes.folder", "read_scene"),
-    ("inverse.fit", "fit_scene"),
-    ("inverse.fit", "_initial_pose"),
-    ("inverse.pose", "initial_pose"),
-    ("inverse.pose_combined", "combined_poses"),
-    ("inverse.rim", "refine_centres"),
-    ("inverse.fit", "totem_pixels"),
-    ("inverse.fit", "frame_for_scene"),
-    ("inverse.fit", "_integrator"),
-    ("inverse.fit", "_outline"),
-    ("inverse.fit", "_usable_pixels"),
-    ("inverse.fit", "_optimise"),
-    ("inverse.fit", "_pose_check"),
-    ("inverse.view", "render_view"),
-    ("inverse.fit", "_totem_outputs"),
-    ("inverse.fit", "exit_rays"),
-    ("inverse.fit", "_camera_view"),
-    ("inverse.fit", "scene_fingerprint"),
-    ("inverse.view", "slice_colours"),
-    ("inverse.view", "plane_sweep"),
-    ("inverse.view", "holdout_errors"),
-    ("inverse.view", "stereo_weight"),
-    ("inverse.fit_files", "write_fit"),
-    ("verify.report", "verify_scene"),
-    ("verify.region", "protected_region"),
-    ("verify.patches", "pixel_errors"),
-    ("verify.corroborate", "corroboration"),
-    ("verify.absence", "absence"),
-    ("verify.patches", "heatmaps"),
-    ("verify.verdict", "decide"),
-    ("verify.report", "write_verify"),
+    ("inverse.fit.fit", "fit_scene"),
+    ("inverse.fit.fit", "_initial_pose"),
+    ("inverse.pose.pose", "initial_pose"),
+    ("inverse.pose.combined", "combined_poses"),
+    ("inverse.pose.rim", "refine_centres"),
+    ("inverse.fit.fit", "totem_pixels"),
+    ("inverse.fit.fit", "frame_for_scene"),
+    ("inverse.fit.fit", "_integrator"),
+    ("inverse.fit.fit", "_outline"),
+    ("inverse.fit.fit", "_usable_pixels"),
+    ("inverse.fit.fit", "_optimise"),
+    ("inverse.fit.fit", "_pose_check"),
+    ("inverse.view.view", "render_view"),
+    ("inverse.fit.fit", "_totem_outputs"),
+    ("inverse.fit.fit", "exit_rays"),
+    ("inverse.fit.fit", "_camera_view"),
+    ("inverse.fit.fit", "scene_fingerprint"),
+    ("inverse.view.view", "slice_colours"),
+    ("inverse.view.view", "plane_sweep"),
+    ("inverse.view.view", "holdout_errors"),
+    ("inverse.view.view", "stereo_weight"),
+    ("inverse.fit.files", "write_fit"),
+    ("verify.report.report", "verify_scene"),
+    ("verify.metrics.region", "protected_region"),
+    ("verify.metrics.patches", "pixel_errors"),
+    ("verify.metrics.corroborate", "corroboration"),
+    ("verify.metrics.absence", "absence"),
+    ("verify.metrics.patches", "heatmaps"),
+    ("verify.verdict.verdict", "decide"),
+    ("verify.report.report", "write_verify"),
 ]
 
 
@@ -128,7 +128,7 @@ def profile_one(scene_dir: str, out: str, kernels: bool = True) -> dict:
         fn = getattr(mod, fn_name)
         originals.append((mod, fn_name, fn))
         setattr(mod, fn_name, timer.wrap(fn_name, fn))
-    from verify import cli
+    from verify.cli import commands as cli
 
     t0 = time.perf_counter()
     try:
@@ -154,7 +154,7 @@ def _child(args: list[str]) -> dict:
 
 
 _PLAIN = ("import resource, sys\n"
-          "from verify.cli import main\n"
+          "from verify.cli.commands import main\n"
           "code = main(sys.argv[1:])\n"
           "kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
           "print(f'peak_kb {kb}', file=sys.stderr)\n"

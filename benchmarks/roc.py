@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from verify.calibration import clopper_pearson, load, statistic_of
-from verify.verdict import MAX_HOLDOUT, MIN_JUDGED, THRESHOLDS
+from verify.verdict.calibration import clopper_pearson, load, statistic_of
+from verify.verdict.verdict import MAX_HOLDOUT, MIN_JUDGED, THRESHOLDS
 
 JUDGES = ("L1", "RANGE", "UNSEEN", "ABSENT")
 

@@ -14,7 +14,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import make_set  # noqa: E402
-from verify.bench import run_bench  # noqa: E402
+from verify.batch.bench import run_bench  # noqa: E402
 
 
 def main(argv=None) -> int:

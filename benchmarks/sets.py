@@ -17,8 +17,8 @@ runs when this module is imported. A photo is named ``<preset>-<seed>`` (the unt
 scene), ``-<n>totems`` for the totems study, ``-resting`` for totems resting on the floor
 or ground (``RESTING``: box, outdoor, window), ``-<kind>`` when manipulated and
 ``+<channel>`` when recaptured (``totems recapture``); the pristine photos keep the
-standard set's names. Channels are :class:`scenes.channel.Channel` settings. Each set
-also holds scenes rendered by Blender's Cycles on seeds of its own (``CYCLES``;
+standard set's names. Channels are :class:`scenes.channel.channel.Channel` settings. Each
+set also holds scenes rendered by Blender's Cycles on seeds of its own (``CYCLES``;
 ``make_set.py --cycles`` builds them through ``benchmarks/cycles/``, and recaptures them
 in ``CYCLES_CHANNELS``).
 """
@@ -27,15 +27,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from scenes.presets import PRESETS
-from scenes.tamper import KINDS
+from scenes.synthetic.presets import PRESETS
+from scenes.tamper.tamper import KINDS
 
 __all__ = ["CHANNELS", "SEEDS", "CYCLES", "CYCLES_CHANNELS", "RESERVED", "Recipe", "RECIPES",
            "Photo", "SETS", "check_disjoint", "photos"]
 
 UNTOUCHED = "none"
 
-# name -> scenes.channel.Channel fields (the camera's and the messenger's steps)
+# name -> scenes.channel.channel.Channel fields (the camera's and the messenger's steps)
 CHANNELS = {
     "pristine": {},
     "jpeg90": {"jpeg": (90,)},
@@ -73,13 +73,13 @@ RESERVED = {"validation of the thresholds (README, 2026-12)":
 class Recipe:
     """Which photos a set makes of each of its seeds.
 
-    kinds : "none" (the untouched photo) and manipulations (``scenes.tamper.KINDS``).
+    kinds : "none" (the untouched photo) and manipulations (``scenes.tamper.tamper.KINDS``).
     channels : each photo in every one of these, or, with ``rotate`` = k, in
         k of them, turning through the list from seed to seed (so every channel meets
         every preset without every photo in every channel).
     presets, seeds : a subset of the set's (None: all).
     n_totems : the number of totems (None: the preset's).
-    placement : how the totems stand (``scenes.placement``; None: the preset's).
+    placement : how the totems stand (``scenes.synthetic.placement``; None: the preset's).
     """
     kinds: tuple = (UNTOUCHED,)
     channels: tuple = ("pristine",)

@@ -13,8 +13,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from scenes import folder
-from scenes.make import make_scene
-from scenes.presets import PRESETS
+from scenes.synthetic.make import make_scene
+from scenes.synthetic.presets import PRESETS
 
 
 def _label(scene: Path, preset: str) -> str:

@@ -12,8 +12,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from scenes import folder
-from scenes.make import make_scene
-from scenes.tamper import KINDS, tamper
+from scenes.synthetic.make import make_scene
+from scenes.tamper.tamper import KINDS, tamper
 
 TILE = (200, 150)
 

@@ -1,12 +1,12 @@
 """The totem pixels, and the same pixels as rays into the scene: the one data type
 from the fit to verify.
 
-A totem pixel's camera ray, refracted into and out of its glass sphere at the fitted
-centre, leaves the glass as a ray into the scene; the pixel's colour, with the glass's
-front reflection taken off and divided by its Fresnel transmittance, is the radiance that
-ray brought back. The view's stereo (:mod:`inverse.view`) and the verify metrics that read
-the totems directly (:mod:`verify.corroborate`, :mod:`verify.absence`) all take a
-:class:`TotemRays`.
+A totem pixel's camera ray, refracted into and out of its glass sphere at the fitted centre,
+leaves the glass as a ray into the scene; the pixel's colour, with the glass's front
+reflection taken off and divided by its Fresnel transmittance, is the radiance that ray
+brought back. The view's stereo (:mod:`inverse.view.view`) and the verify metrics that read
+the totems directly (:mod:`verify.metrics.corroborate`, :mod:`verify.metrics.absence`) all
+take a :class:`TotemRays`.
 """
 
 from __future__ import annotations

@@ -251,7 +251,7 @@ def write_calib(path, K: np.ndarray, dist=None, roi=None, mtx_raw=None) -> None:
     """Write ``calib.npy`` as the NeRF path does (a pickled dict).
 
     ``mtx_raw``: the lens' K in the raw photo, when it differs from ``K`` (the K of the
-    undistorted image); see ``scenes/calibrate.py``.
+    undistorted image); see ``scenes/photo/calibrate.py``.
     """
     calib = {"mtx": np.asarray(K, dtype=np.float64)}
     if mtx_raw is not None:

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.camera import pixel_rays
 from inverse.grid import frame_for_scene
 from inverse.rays import TotemRays
+from scenes.camera import pixel_rays
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 from scenes.colour import srgb_to_linear
-from verify.absence import absence, in_view, line_absence
+from verify.metrics.absence import absence, in_view, line_absence
 
 Z_PLANE = 3.0
 CELL = 6.9                      # px, as test_corroborate's

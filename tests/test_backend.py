@@ -14,15 +14,15 @@ TESTS = Path(__file__).resolve().parent
 
 FRESH = textwrap.dedent("""
     import sys
-    import inverse.fit, inverse.fit_files, inverse.integrator, inverse.outline
-    import inverse.sphere, inverse.view, scenes.render, scenes.tamper3d, verify.cli
-    import verify.report
+    import inverse.fit.fit, inverse.fit.files, inverse.integrator, inverse.fit.outline
+    import inverse.sphere, inverse.view.view, scenes.synthetic.render
+    import scenes.tamper.tamper3d, verify.cli, verify.report.report
     assert "drjit" not in sys.modules and "mitsuba" not in sys.modules, \\
         "importing the package loaded Dr.Jit"
 
     import dataclasses
     import numpy as np
-    from inverse.fit import FitSettings, fit_scene
+    from inverse.fit.fit import FitSettings, fit_scene
     from verify_cases import make_scene
 
     settings = FitSettings(density_res=(8, 12, 16), colour_res=(1, 15, 20),

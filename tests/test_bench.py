@@ -8,8 +8,8 @@ import shutil
 
 import pytest
 
-from scenes.make import make_scene
-from scenes.tamper import tamper
+from scenes.synthetic.make import make_scene
+from scenes.tamper.tamper import tamper
 from test_cli import totems
 
 pytestmark = pytest.mark.slow

@@ -6,8 +6,8 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from scenes import folder
-from scenes.calibrate import board_points, calibrate, write_calib
 from scenes.errors import BadInput
+from scenes.photo.calibrate import board_points, calibrate, write_calib
 
 BOARD = (8, 5)          # inner corners
 SQUARE = 0.03           # metres

@@ -16,8 +16,9 @@ import pytest
 from scipy import stats
 
 from scenes.errors import BadInput
-from scenes.presets import PRESETS
-from verify import calibration, patches, verdict
+from scenes.synthetic.presets import PRESETS
+from verify.metrics import patches
+from verify.verdict import calibration, verdict
 from verify_cases import make_scene
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "calibrate_verdict.py"
@@ -243,5 +244,5 @@ def test_the_shipped_calibration_reads_and_puts_the_line_near_five_percent():
     # the verdict's line (score 1): the word and the p-value agree, about 5 %
     assert 0.02 <= cal.p_value(1.0) <= 0.1
     # statistics computed at thresholds the verdict no longer uses would misplace p
-    from verify.verdict import THRESHOLDS
+    from verify.verdict.verdict import THRESHOLDS
     assert cal.source.get("thresholds", THRESHOLDS) == THRESHOLDS

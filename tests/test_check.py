@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from scenes import folder
-from scenes.make import make_scene
+from scenes.synthetic.make import make_scene
 from test_cli import assert_one_line_error, totems
 
 SQUARE = (128, 56, 192, 120)      # x0, y0, x1, y1: 64 px, above the totems, mid-image

@@ -90,7 +90,7 @@ def test_inputs_untouched_on_error(tmp_path):
 
 def test_the_summary_line_names_what_the_verb_wrote(capsys):
     """crosscheck once said 'wrote SCENE' where it wrote OUT/crosscheck."""
-    from verify.cli import _print_summary
+    from verify.cli.commands import _print_summary
 
     _print_summary("crosscheck", {"scene": "S", "crosscheck": "OUT/crosscheck"})
     _print_summary("fit", {"fit": "OUT/fit"})
@@ -101,7 +101,7 @@ def test_the_summary_line_names_what_the_verb_wrote(capsys):
 
 def test_a_crash_is_not_a_verdict(monkeypatch, capsys):
     """An unexpected error exits 70 (a bug), never 1 (inconsistent)."""
-    from verify import cli
+    from verify.cli import commands as cli
 
     def boom(args):
         raise ZeroDivisionError("boom")
@@ -134,7 +134,7 @@ def _parsers(parser, path=()):
 
 
 def test_every_help_shows_an_example_and_the_exit_codes(capsys):
-    from verify.cli import build_parser
+    from verify.cli.commands import build_parser
 
     seen = []
     for path, parser in _parsers(build_parser()):
@@ -161,8 +161,9 @@ def test_help_is_printed_and_exits_0():
 def test_resting_reaches_the_fit_and_every_photo_of_a_check(monkeypatch, tmp_path):
     """``--resting`` sets ``FitSettings.resting`` for fit (and check, which fits alike),
     and a check of several photos passes it to each; without it the fit is not told."""
-    import inverse.fit
-    from verify import checks, cli
+    import inverse.fit.fit
+    from verify.batch import checks
+    from verify.cli import commands as cli
 
     seen = []
 
@@ -170,7 +171,7 @@ def test_resting_reaches_the_fit_and_every_photo_of_a_check(monkeypatch, tmp_pat
         seen.append(settings.resting)
         raise KeyboardInterrupt                      # stop before anything is written
 
-    monkeypatch.setattr(inverse.fit, "fit_scene", fake_fit)
+    monkeypatch.setattr(inverse.fit.fit, "fit_scene", fake_fit)
     scene = tiny_scene(tmp_path / "s")
     assert cli.main(["fit", str(scene), "--resting", "--quiet"]) == 130
     assert cli.main(["fit", str(scene), "--quiet"]) == 130
@@ -188,7 +189,7 @@ def test_resting_reaches_the_fit_and_every_photo_of_a_check(monkeypatch, tmp_pat
 
 
 def test_the_summary_line_says_why_a_photo_is_unverifiable(capsys):
-    from verify import cli
+    from verify.cli import commands as cli
 
     base = {"score": 1.2, "threshold": 1.0, "scores": {}, "protected_fraction": 0.5,
             "judged_fraction": 0.4, "metrics": {}, "verify": "out", "p_value": None}

@@ -7,13 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.camera import pixel_rays
 from inverse.grid import frame_for_scene
 from inverse.rays import TotemRays
+from scenes.camera import pixel_rays
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 from scenes.colour import srgb_to_linear
-from verify.corroborate import cell_errors, corroboration, unseen
-from verify.patches import chroma_distance
+from verify.metrics.corroborate import cell_errors, corroboration, unseen
+from verify.metrics.patches import chroma_distance
 
 Z_PLANE = 3.0
 CELL = 6.9          # px: 34 x 45 cells over this 240 x 180 view and its 15 % margins

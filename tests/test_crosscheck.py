@@ -8,8 +8,9 @@ import pytest
 
 from scenes import folder
 from scenes.errors import BadInput
-from scenes.nerf_layout import read_nerf_case
-from verify.crosscheck import crosscheck, parse_loss_txt, read_nerf_log, write_crosscheck
+from scenes.photo.nerf_layout import read_nerf_case
+from verify.report.crosscheck import (crosscheck, parse_loss_txt, read_nerf_log,
+                                      write_crosscheck)
 
 W, H, DS = 320, 240, 4
 ROI = [8, 4, 304, 232]

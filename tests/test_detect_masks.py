@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from scenes import folder
-from scenes.detect_masks import ellipse_masks, find_totems, propose_masks, write_masks
 from scenes.errors import BadInput
-from verify.cli import EXIT_INCOMPLETE
+from scenes.photo.detect_masks import ellipse_masks, find_totems, propose_masks, write_masks
+from verify.cli.commands import EXIT_INCOMPLETE
 
 
 def _photo(seed, n=3, totems=True, W=320, H=240):
@@ -94,7 +94,7 @@ def test_cone_points_are_tangent_to_the_sphere():
 @pytest.fixture(scope="module")
 def envmap_scene(tmp_path_factory):
     """A rendered envmap scene (320x240, 32 spp): photo, true masks, clean view, K."""
-    from scenes.make import make_scene
+    from scenes.synthetic.make import make_scene
     out = make_scene(tmp_path_factory.mktemp("dm") / "s", preset="envmap", seed=3,
                      size=(320, 240), spp=32)
     scene = folder.read_scene(out)
@@ -220,10 +220,11 @@ def test_masks_benchmark_tells_an_imprecise_outline_from_a_missed_totem():
 
 
 def test_refraction_through_the_sphere_matches_inverse_sphere():
-    # scenes/glass.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell and
-    # Fresnel code): the same exit points and directions for rays across the sphere.
+    # scenes/photo/glass.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell
+    # and Fresnel code): the same exit points and directions for rays across the sphere.
     from inverse import sphere
-    from scenes import backend, camera, glass
+    from scenes import backend, camera
+    from scenes.photo import glass
     backend.use()
     mi = backend.modules()[1]
     K = camera.intrinsics(640, 480, 60)
@@ -249,7 +250,8 @@ def glass_and_ball():
     """A rendered envmap scene (320x240, 16 spp) whose fourth sphere is an opaque
     textured ball: photo, K, the three glass spheres' and the ball's circles (the image
     of each tangent cone, (u0, v0, s) pixels)."""
-    from scenes import camera, presets, render
+    from scenes import camera
+    from scenes.synthetic import presets, render
     desc = presets.describe("envmap", seed=4, size=(320, 240))
     ball = desc["totems"].pop()
     T = np.eye(4)
@@ -275,8 +277,8 @@ def test_the_key_tells_glass_from_an_opaque_ball(glass_and_ball):
     # What the key predicts through the glass is found inside the three glass spheres,
     # not inside the ball, and the detector given the key's IoR takes the glass ones.
     import cv2
-    from scenes import glass
-    from scenes.detect_masks import find_totems
+    from scenes.photo import glass
+    from scenes.photo.detect_masks import find_totems
     img, K, circles = glass_and_ball
     g = glass.glass_scores(cv2.GaussianBlur(img, (0, 0), glass.SIGMA_INSIDE_PX),
                            cv2.GaussianBlur(img, (0, 0), glass.SIGMA_PX), circles, K, [1.52])
@@ -332,9 +334,10 @@ def _banded_totem(W=200, H=150, q=(122.0, 84.0, 21.0), seed=0):
 
 def test_the_wide_fit_finds_the_rim_outside_the_dark_band():
     # Started from a coarse circle on the dark band (0.78 of the size, 0.3 radii off),
-    # the wide fit (scenes/cone_fit.py) finds the rim of a 21 px totem on a textured
+    # the wide fit (scenes/photo/cone_fit.py) finds the rim of a 21 px totem on a textured
     # floor at IoU >= 0.95, within a pixel.
-    from scenes import cone_fit, silhouette
+    from scenes import silhouette
+    from scenes.photo import cone_fit
     img, K, truth = _banded_totem()
     field = silhouette.orientation_field(img, 1.0)
     polish = silhouette.gradients(img, 0.7)

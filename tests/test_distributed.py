@@ -1,7 +1,8 @@
-"""Batches on Dask (``verify/batch.py``, ``verify/runs.py``, ``verify/checks.py``):
-``totems check SCENE...`` gives each photo the verdict ``totems check SCENE`` gives it,
-records a photo that fails and finishes the others (exit 2), resumes without running
-a finished photo again, and refuses workers that run other code, in one line."""
+"""Batches on Dask (``verify/batch/batch.py``, ``verify/batch/runs.py``,
+``verify/batch/checks.py``): ``totems check SCENE...`` gives each photo the verdict ``totems
+check SCENE`` gives it, records a photo that fails and finishes the others (exit 2), resumes
+without running a finished photo again, and refuses workers that run other code, in one
+line."""
 
 import json
 import os
@@ -12,11 +13,11 @@ import sys
 import pytest
 
 from scenes.errors import BadInput
-from scenes.make import make_scene
-from scenes.tamper import tamper
+from scenes.synthetic.make import make_scene
+from scenes.tamper.tamper import tamper
 from test_cli import tiny_scene, totems
-from verify import batch
-from verify.checks import photo_line, unique_names
+from verify.batch import batch
+from verify.batch.checks import photo_line, unique_names
 
 
 # --------------------------------------------------------------------------- no cluster
@@ -77,7 +78,7 @@ def test_a_missing_folder_is_refused_before_anything_runs(tmp_path):
 # --------------------------------------------------------------------------- a cluster
 
 def test_a_worker_running_another_version_is_refused(tmp_path, monkeypatch, capsys):
-    from verify.cli import main
+    from verify.cli.commands import main
 
     scenes = [tiny_scene(tmp_path / "a"), tiny_scene(tmp_path / "b")]
     monkeypatch.setattr(batch, "package_version", lambda: "9.9.9")   # this client only
@@ -110,7 +111,7 @@ def _away_from_the_totems(scene_dir, side=8):
     (so the edit shares the photo's fit)."""
     from scipy.ndimage import binary_dilation
 
-    from inverse.rim import READ_PX
+    from inverse.pose.rim import READ_PX
     from scenes import folder
 
     masks = folder.read_scene(scene_dir).masks.any(0)

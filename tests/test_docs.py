@@ -1,5 +1,5 @@
-"""The documentation's links: every relative link and picture in README.md and docs/*.md
-points at a file of the repository, and an anchor at a heading of its page."""
+"""The documentation's links: every relative link and picture in README.md and the pages
+under docs/ points at a file of the repository, and an anchor at a heading of its page."""
 
 import re
 from pathlib import Path
@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 
 LINK = re.compile(r"!?\[(?:[^\]\[]|\[[^\]]*\])*\]"      # [text], one level of [] inside
                   r"\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")   # (target "title")

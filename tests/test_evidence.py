@@ -1,5 +1,5 @@
-"""verify.evidence: parallax is the angle between totems in their rays' spacings; a near
-textured wall two totems see is resolved, the same wall seen by one totem, or by two
+"""verify.metrics.evidence: parallax is the angle between totems in their rays' spacings; a
+near textured wall two totems see is resolved, the same wall seen by one totem, or by two
 that disagree on its colours, is not."""
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 
 from inverse.grid import FrustumFrame
 from inverse.rays import TotemRays
-from verify import evidence
+from verify.metrics import evidence
 
 K = np.array([[600.0, 0.0, 159.5], [0.0, 600.0, 119.5], [0.0, 0.0, 1.0]])
 SIZE = (320, 240)                     # W, H: a 30 degree view

@@ -9,10 +9,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from scenes import backend, camera
-from scenes import colour, render
 from inverse.grid import FrustumFrame, frame_for_scene, resample
+from scenes import backend, camera
+from scenes import colour
 from scenes.errors import BadInput
+from scenes.synthetic import render
 
 dr, mi = backend.modules()
 
@@ -158,8 +159,8 @@ def test_totem_centre_gradient_matches_finite_differences():
 
 def test_camera_columns_through_mitsuba_render():
     """The registered integrator renders the grid like render_view does (no totems)."""
-    from inverse import view
     from inverse.integrator import TotemGridIntegrator
+    from inverse.view import view
 
     loaded = mi.load_dict({"type": "totem_grid", "n_samples": 8})
     assert isinstance(loaded, TotemGridIntegrator) and loaded.n_samples == 8
@@ -178,7 +179,8 @@ def test_camera_columns_through_mitsuba_render():
 
 @pytest.fixture(scope="module")
 def small_scene(tmp_path_factory):
-    from scenes import folder, presets
+    from scenes import folder
+    from scenes.synthetic import presets
 
     desc = presets.describe("box", 3, size=(160, 120), n_totems=4)
     image = render.render(desc, spp=16)
@@ -194,7 +196,7 @@ def small_scene(tmp_path_factory):
 def _perturbed(small_scene, steps=(20, 30)):
     """The small scene starting from its true centres but totem 1's moved 12 mm and 8 mm
     sideways, the true centres, that start, and small fit settings for it."""
-    from inverse import fit
+    from inverse.fit import fit
 
     scene, truth = small_scene
     init = truth.copy()
@@ -207,7 +209,8 @@ def _perturbed(small_scene, steps=(20, 30)):
 
 @pytest.mark.slow
 def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path):
-    from inverse import fit, fit_files, view
+    from inverse.fit import fit, files
+    from inverse.view import view
 
     scene, truth, init, st = _perturbed(small_scene)
     r = fit.fit_scene(scene, settings=st)
@@ -235,12 +238,12 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     assert np.abs(r.totem_pred[m] - obs).mean() < np.abs(obs.mean(0) - obs).mean()
 
     # write_fit / load_fit round trip, and re-rendering from the saved grid.
-    fit_files.write_fit(r, tmp_path / "fit", scene=scene)
-    back = fit_files.load_fit(tmp_path / "fit")
+    files.write_fit(r, tmp_path / "fit", scene=scene)
+    back = files.load_fit(tmp_path / "fit")
     assert np.allclose(back.centers, r.centers) and np.allclose(back.initial, r.initial)
     assert np.allclose(back.totem_points, r.totem_points)
     assert np.abs(back.recon - r.recon).max() <= 1 / 255 + 1e-6
-    assert back.scene_fingerprint == fit_files.scene_fingerprint(scene)
+    assert back.scene_fingerprint == files.scene_fingerprint(scene)
     assert back.pose_uncertainty is None                 # a given initial pose
     # The fitted colour the glass reflects is kept: linear RGB, non-negative.
     assert back.ambient == r.ambient and len(r.ambient) == 3
@@ -271,11 +274,11 @@ def test_fit_lowers_loss_and_pulls_a_perturbed_centre_back(small_scene, tmp_path
     # The fingerprint follows what the fit reads: the totem pixels and the key.
     outside = scene.image.copy()
     outside[~scene.masks.any(0)] = 0.5
-    assert fit_files.scene_fingerprint(dataclasses.replace(scene, image=outside)) \
+    assert files.scene_fingerprint(dataclasses.replace(scene, image=outside)) \
         == back.scene_fingerprint
-    assert fit_files.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
+    assert files.scene_fingerprint(dataclasses.replace(scene, image=scene.image[::-1])) \
         != back.scene_fingerprint
-    assert fit_files.scene_fingerprint(dataclasses.replace(scene, ior=scene.ior + 0.01)) \
+    assert files.scene_fingerprint(dataclasses.replace(scene, ior=scene.ior + 0.01)) \
         != back.scene_fingerprint
 
 
@@ -284,26 +287,27 @@ def test_the_fingerprint_covers_the_band_the_rim_search_reads(small_scene):
     # each mask: a pixel there changes the fit, one farther away does not.
     from scipy.ndimage import binary_dilation
 
-    from inverse import fit_files, rim
+    from inverse.fit import files
+    from inverse.pose import rim
 
     scene, _ = small_scene
     scene = dataclasses.replace(scene, initial_pose=None)
     masks = scene.masks.any(0)
     band = binary_dilation(masks, iterations=rim.READ_PX) & ~masks
     far = ~binary_dilation(masks, iterations=rim.READ_PX + 1)
-    base = fit_files.scene_fingerprint(scene)
+    base = files.scene_fingerprint(scene)
     for where, same in ((band, False), (far, True)):
         v, u = np.argwhere(where)[len(np.argwhere(where)) // 2]
         image = scene.image.copy()
         image[v, u] = 1.0 - image[v, u]
-        got = fit_files.scene_fingerprint(dataclasses.replace(scene, image=image))
+        got = files.scene_fingerprint(dataclasses.replace(scene, image=image))
         assert (got == base) == same
 
 
 def test_the_default_pose_weighs_mask_and_photo_and_says_how_sure(small_scene):
     # No given pose: the masks' and the photo's weighed (fit.json pose_uncertainty);
     # the --pose-from overrides give none.
-    from inverse import fit
+    from inverse.fit import fit
 
     scene, truth = small_scene
     scene = dataclasses.replace(scene, initial_pose=None)
@@ -319,20 +323,20 @@ def test_the_default_pose_weighs_mask_and_photo_and_says_how_sure(small_scene):
 
 
 def test_load_fit_refuses_missing_or_corrupt(tmp_path):
-    from inverse import fit_files
+    from inverse.fit import files
 
     with pytest.raises(BadInput):
-        fit_files.load_fit(tmp_path / "nothing")
+        files.load_fit(tmp_path / "nothing")
     d = tmp_path / "fit"
     d.mkdir()
-    for name in fit_files.FIT_FILES:
+    for name in files.FIT_FILES:
         (d / name).write_bytes(b"garbage")
     with pytest.raises(BadInput):
-        fit_files.load_fit(d)
+        files.load_fit(d)
 
 
 def test_bad_input(small_scene):
-    from inverse import fit
+    from inverse.fit import fit
 
     scene, truth = small_scene
     nan = scene.image.copy()
@@ -366,7 +370,7 @@ def test_rays_leaving_through_the_top_face_are_told_apart():
 
 
 def test_ray_batches_cover_every_ray_once_an_epoch_in_a_seeded_order():
-    from inverse.batches import ray_batches
+    from inverse.fit.batches import ray_batches
 
     n, size = 1000, 300
     gen = ray_batches(n, size, seed=3)
@@ -383,7 +387,7 @@ def test_ray_batches_cover_every_ray_once_an_epoch_in_a_seeded_order():
 
 
 def test_a_batch_holding_every_ray_gives_the_full_photometric_term():
-    from inverse.batches import DeviceRays, photo_terms
+    from inverse.fit.batches import DeviceRays, photo_terms
     from inverse.rays import TotemPixels
 
     itg, frame, _, _ = _integrator()
@@ -408,7 +412,7 @@ def test_a_batch_holding_every_ray_gives_the_full_photometric_term():
 
 @pytest.mark.slow
 def test_a_batched_fit_recovers_the_pose_and_the_view_as_the_full_batch_one(small_scene):
-    from inverse import fit
+    from inverse.fit import fit
 
     scene, truth, init, st = _perturbed(small_scene, steps=(40, 60))
     st = dataclasses.replace(st, stereo=False)
@@ -433,7 +437,7 @@ def test_two_fits_of_one_photo_agree_to_the_last_bit(small_scene):
     fixed point, so the grid, the centres, the losses and the view of two fits whose
     backward pass runs on two threads, and of a third on one, are equal, not merely
     close."""
-    from inverse import fit
+    from inverse.fit import fit
     from scenes import backend
 
     scene, _, _, st = _perturbed(small_scene, steps=(10, 20))

@@ -54,7 +54,7 @@ def test_density_at_is_the_textures_trilinear_lookup_with_its_gradient():
 
 
 def test_total_variation_and_its_stencil_gradient_against_numpy():
-    from inverse.losses import TotalVariation
+    from inverse.fit.losses import TotalVariation
 
     rng = np.random.default_rng(5)
     for shape in ((4, 5, 6, 1), (1, 6, 7, 3), (2, 1, 3, 3)):
@@ -84,9 +84,9 @@ def test_a_step_gives_the_loss_and_gradients_of_the_texture_lookup(monkeypatch):
     gradients in the grids and the centres, with the density read by ``density_at`` and
     by ``mi.Texture3f.eval`` (the plain step): equal to float rounding."""
     from inverse import integrator
-    from inverse.batches import DeviceRays, photo_terms
+    from inverse.fit.batches import DeviceRays, photo_terms
+    from inverse.fit.losses import TotalVariation
     from inverse.grid import frame_for_scene
-    from inverse.losses import TotalVariation
     from inverse.rays import TotemPixels
     from scenes import camera
 

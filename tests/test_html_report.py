@@ -1,5 +1,5 @@
-"""verify.html_report: report.html and bench.html are whole, self-contained pages that
-say the verdict first and give away neither a path nor the key."""
+"""verify.report.html_report: report.html and bench.html are whole, self-contained pages
+that say the verdict first and give away neither a path nor the key."""
 
 import base64
 import dataclasses
@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from scenes import folder
-from verify import bench, calibration, html_report, report
+from verify.batch import bench
+from verify.report import html_report, report
+from verify.verdict import calibration
 from verify_cases import (CENTERS, SQUARE, H, K, W, box_mask, make_fit, make_scene, texture,
                           with_square)
 

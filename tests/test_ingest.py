@@ -8,9 +8,9 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 
 from scenes import folder
-from scenes.calibrate import undistorted_K, valid_roi
 from scenes.errors import BadInput
-from scenes.ingest import ingest
+from scenes.photo.calibrate import undistorted_K, valid_roi
+from scenes.photo.ingest import ingest
 
 W, H = 320, 240
 K_RAW = np.array([[300.0, 0, 161.0], [0, 300.0, 118.0], [0, 0, 1]])

@@ -80,7 +80,7 @@ def test_a_removal_away_from_the_totems_shares_its_photos_fit(tmp_path):
     pixels and the noise elsewhere are taken."""
     import numpy as np
 
-    from inverse.fit_files import pixels_read, scene_fingerprint
+    from inverse.fit.files import pixels_read, scene_fingerprint
     from scenes import folder
 
     out, scene = _removal_case(tmp_path, (100, 10, 120, 40))
@@ -93,7 +93,7 @@ def test_a_removal_away_from_the_totems_shares_its_photos_fit(tmp_path):
 
 
 def test_a_removal_inside_the_band_gets_its_own_fit(tmp_path):
-    from inverse.fit_files import scene_fingerprint
+    from inverse.fit.files import scene_fingerprint
     from scenes import folder
 
     out, scene = _removal_case(tmp_path, (54, 40, 62, 56))     # 2-10 px right of the rim

@@ -3,7 +3,8 @@ and descent from a perturbed centre."""
 
 import numpy as np
 
-from inverse import outline, pose
+from inverse.fit import outline
+from inverse.pose import pose
 from scenes import backend, camera
 
 dr, mi = backend.modules()

@@ -1,10 +1,10 @@
-"""verify.patches: the NeRF path's patch grid, heatmaps and patch AP."""
+"""verify.metrics.patches: the NeRF path's patch grid, heatmaps and patch AP."""
 
 import numpy as np
 import pytest
 
 from scenes.errors import BadInput
-from verify import patches
+from verify.metrics import patches
 from verify_cases import H, W, box_mask, make_scene, texture, with_square
 
 NOTHING = 1e-6   # no distance: the photo is blurred in float32 (resolution.gaussian)

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from scenes import camera, placement, presets, render
+from scenes import camera
 from scenes.errors import BadInput
+from scenes.synthetic import placement, presets, render
 
 
 def _support(desc):
@@ -98,7 +99,7 @@ def test_scene_make_places_totems_on_stands(tmp_path, capsys):
     truth/scene.json; an unknown placement is a one-line error, exit 2."""
     import json
 
-    from verify import cli
+    from verify.cli import commands as cli
 
     out = tmp_path / "s"
     assert cli.main(["scene", "make", str(out), "--placement", "stand", "--size", "96x72",

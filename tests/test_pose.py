@@ -8,7 +8,7 @@ by the ray/sphere discriminant here and by Mitsuba's own sphere in one test.
 import numpy as np
 import pytest
 
-from inverse import pose
+from inverse.pose import pose
 from scenes import camera
 from scenes.errors import BadInput
 

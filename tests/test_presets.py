@@ -5,8 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from scenes import camera, folder, make, presets, render, textures
+from scenes import camera, folder
 from scenes.errors import BadInput
+from scenes.synthetic import make, presets, render, textures
 
 NEW = ("outdoor", "window", "tabletop")
 

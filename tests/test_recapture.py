@@ -18,11 +18,13 @@ import numpy as np
 import pytest
 from test_cli import assert_one_line_error, totems
 
-from scenes import camera, channel, folder, jpeg, render
-from scenes.channel import Channel
+from scenes import camera, folder, jpeg
+from scenes.channel import channel
+from scenes.channel.channel import Channel
+from scenes.channel.recapture import recapture
 from scenes.errors import BadInput
-from scenes.make import make_scene
-from scenes.recapture import recapture
+from scenes.synthetic import render
+from scenes.synthetic.make import make_scene
 
 # JPEG standard (ITU T.81) Annex K.1, luminance, natural (row-major) order
 ANNEX_K_LUMA = np.array([
@@ -263,7 +265,7 @@ def test_photon_noise_has_the_poisson_gaussian_variance():
 # --------------------------------------------------------------------------- JPEG folders
 
 def test_a_folder_with_image_jpg_is_read_tampered_and_benched(scene, tmp_path):
-    from verify.bench import find_scenes
+    from verify.batch.bench import find_scenes
 
     out = tmp_path / "jpg"
     recapture(scene, out, Channel(jpeg=(75,)))

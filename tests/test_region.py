@@ -1,10 +1,10 @@
-"""verify.region: the protected region lies where the totems' points project."""
+"""verify.metrics.region: the protected region lies where the totems' points project."""
 
 import numpy as np
 import pytest
 
 from scenes.errors import BadInput
-from verify import region
+from verify.metrics import region
 from verify_cases import H, K, PROTECT_BOX, W, box_mask, points_in_box
 
 

@@ -1,4 +1,5 @@
-"""verify.report: report.json fields, metrics against hand values, no key in outputs."""
+"""verify.report.report: report.json fields, metrics against hand values, no key in
+outputs."""
 
 import json
 from types import SimpleNamespace
@@ -8,7 +9,7 @@ import pytest
 
 from scenes import folder
 from scenes.errors import BadInput
-from verify import report
+from verify.report import report
 from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_fit,
                           make_scene, texture, with_square)
 

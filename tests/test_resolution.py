@@ -1,4 +1,4 @@
-"""The photo blurred to the evidence's resolution (verify/resolution.py)."""
+"""The photo blurred to the evidence's resolution (verify/metrics/resolution.py)."""
 
 import io
 
@@ -8,7 +8,7 @@ from PIL import Image
 from scipy import ndimage
 
 from scenes import jpeg
-from verify import patches, resolution
+from verify.metrics import patches, resolution
 
 K = np.array([[100.0, 0.0, 80.0], [0.0, 100.0, 60.0], [0.0, 0.0, 1.0]])
 SIZE = (160, 120)

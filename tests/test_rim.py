@@ -6,13 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inverse import pose, rim
-from scenes import drawn_masks, folder
+from inverse.pose import pose, rim
+from scenes import folder
+from scenes.photo import drawn_masks
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    from scenes.make import make_scene
+    from scenes.synthetic.make import make_scene
 
     out = make_scene(tmp_path_factory.mktemp("rim") / "s", preset="envmap", seed=2,
                      size=(640, 480), spp=16)

@@ -51,7 +51,7 @@ def test_auc_within_each_preset_uses_that_presets_untouched_photos():
 
 
 def test_untouched_rates_by_placement_and_unverifiable_photos():
-    from verify.calibration import fit_tail
+    from verify.verdict.calibration import fit_tail
 
     def run(kind, preset, placement, verdict, t):
         return {"kind": kind, "preset": preset, "placement": placement, "verdict": verdict,

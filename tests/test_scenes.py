@@ -7,8 +7,9 @@ import pytest
 from scipy import ndimage
 
 from scenes import backend, camera
-from scenes import colour, folder, make, presets, render
+from scenes import colour, folder
 from scenes.errors import BadInput
+from scenes.synthetic import make, presets, render
 
 W, H = 160, 120
 
@@ -242,7 +243,7 @@ def test_a_totem_an_object_hides_is_found_and_left_out_of_a_drawn_key(tmp_path):
     scene is made with the three the camera sees, and scene.json says which went."""
     import json
 
-    from scenes.make import hidden_totems, make_scene
+    from scenes.synthetic.make import hidden_totems, make_scene
 
     desc = presets.describe("outdoor", 12, size=(320, 240), placement="resting")
     ids = render.shape_ids(desc)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from scenes.presets import PRESETS
-from scenes.tamper import KINDS
+from scenes.synthetic.presets import PRESETS
+from scenes.tamper.tamper import KINDS
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "make_set.py"
 _spec = importlib.util.spec_from_file_location("make_set", _PATH)

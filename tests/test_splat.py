@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes import camera
 from inverse.grid import frame_for_scene
 from inverse.rays import TotemRays
-from inverse.splat import holdout_error, splat_image, surface_hits
-from inverse.view import choose_view, stereo_weight
-from inverse.sweep import slice_depths
+from inverse.view.splat import holdout_error, splat_image, surface_hits
+from inverse.view.sweep import slice_depths
+from inverse.view.view import choose_view, stereo_weight
+from scenes import camera
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 
 FRAME = frame_for_scene(K, (W, H), CENTERS, np.full(4, RADIUS))
@@ -186,7 +186,7 @@ def test_linear_interpolation_is_exact_for_a_plane_and_covers_the_hull():
     placed in the wrong triangle would show; the hull must be scipy's (qhull's)."""
     from scipy.spatial import Delaunay
 
-    from inverse.splat import linear_at
+    from inverse.view.splat import linear_at
 
     rng = np.random.default_rng(7)
     flat = np.unique(rng.integers(0, W * H, 2500))
@@ -202,7 +202,7 @@ def test_linear_interpolation_is_exact_for_a_plane_and_covers_the_hull():
 def test_blur_is_ndimages_gaussian_on_a_map():
     from scipy import ndimage
 
-    from inverse.splat import blur
+    from inverse.view.splat import blur
 
     img = np.random.default_rng(2).uniform(0, 1, (H, W))
     for sigma in (8.0, 16.0):
@@ -212,7 +212,7 @@ def test_blur_is_ndimages_gaussian_on_a_map():
 def test_the_whole_views_leaning_to_stereo_is_continuous_across_the_margin():
     """A fit's last bits must not swap one whole view for the other: the leaning moves
     from 1 to 0 over the band around the margin, never by a jump."""
-    from inverse.view import preference
+    from inverse.view.view import preference
 
     grid = 0.05
     ratios = np.linspace(0.8, 1.2, 401)

@@ -1,10 +1,10 @@
-"""The support plane from resting totems (inverse/support.py), against planes and spheres
-built by hand, and the camera view it caps."""
+"""The support plane from resting totems (inverse/view/support.py), against planes and
+spheres built by hand, and the camera view it caps."""
 
 import numpy as np
 import pytest
 
-from inverse.support import plane_from_centres, ray_plane
+from inverse.view.support import plane_from_centres, ray_plane
 
 
 def _resting(normal, offset, radius, spots):
@@ -76,7 +76,7 @@ def test_the_plane_caps_a_view_that_put_the_table_at_infinity():
     the table."""
     from inverse.grid import frame_for_scene
     from inverse.rays import TotemRays
-    from inverse.support import plane_view
+    from inverse.view.support import plane_view
     from scenes.camera import pixel_rays
     from scenes.colour import srgb_to_linear
 
@@ -135,10 +135,10 @@ def test_a_small_tabletop_is_rebuilt_better_with_its_resting_plane(tmp_path):
     that is not (0.337 against 0.394 when written), and protects about as much (the
     plane caps the view, not the region: with the plane's end points it fell to a
     fifth)."""
-    from inverse.fit import FitSettings, fit_scene
+    from inverse.fit.fit import FitSettings, fit_scene
     from scenes import folder
-    from scenes.make import make_scene
-    from verify.region import protected_region
+    from scenes.synthetic.make import make_scene
+    from verify.metrics.region import protected_region
 
     make_scene(tmp_path / "s", preset="tabletop", seed=31, size=(160, 120), spp=16)
     scene, truth = folder.read_scene(tmp_path / "s"), folder.read_truth(tmp_path / "s")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from inverse.grid import frame_for_scene
-from inverse.sweep import plane_sweep, pull_push, semi_global, slice_depths
+from inverse.view.sweep import plane_sweep, pull_push, semi_global, slice_depths
 from plane_cases import CENTERS, RADIUS, H, K, W, rays_onto_plane, texture
 
 
@@ -67,7 +67,7 @@ def test_semi_global_matching_recovers_a_piecewise_constant_label_from_noise():
 
 
 def test_the_shared_consistency_is_the_landing_totems_mean_and_variance():
-    from inverse.sweep import SliceColours
+    from inverse.view.sweep import SliceColours
 
     rng = np.random.default_rng(2)
     n_tot, nk, nt, ns = 4, 5, 6, 7
@@ -88,7 +88,7 @@ def test_the_shared_consistency_is_the_landing_totems_mean_and_variance():
 def test_blur_cells_is_ndimages_gaussian_with_zero_outside():
     from scipy import ndimage
 
-    from inverse.sweep import blur_cells
+    from inverse.view.sweep import blur_cells
 
     rng = np.random.default_rng(3)
     maps = rng.uniform(0, 1, (2, 5, 12, 17)).astype(np.float32)
@@ -105,7 +105,7 @@ def test_blur_cells_is_ndimages_gaussian_with_zero_outside():
 def test_a_rays_pixel_on_a_depth_plane_is_affine_in_inverse_depth():
     from scenes.camera import project
 
-    from inverse.sweep import pixel_lines
+    from inverse.view.sweep import pixel_lines
 
     rng = np.random.default_rng(4)
     K = np.array([[500.0, 0.3, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes import edits2d, folder
+from scenes import folder
 from scenes.errors import BadInput
-from scenes.tamper import KINDS, parse_region, tamper
+from scenes.tamper import edits2d
+from scenes.tamper.tamper import KINDS, parse_region, tamper
 
 SIZE = (160, 120)
 SPP = 8
@@ -37,7 +38,7 @@ def folder_hash(path: Path) -> str:
 
 def make_synthetic(out, seed=1, size=SIZE):
     """A rendered box scene with truth/."""
-    from scenes.make import make_scene
+    from scenes.synthetic.make import make_scene
 
     return make_scene(out, preset="box", seed=seed, size=size, spp=SPP)
 
@@ -141,7 +142,7 @@ def test_inpaint_removes_a_thing_from_a_plain_background(method):
 
 
 def test_inpaint_from_truth_removes_a_real_object(synthetic, tmp_path):
-    from scenes import render
+    from scenes.synthetic import render
 
     out = tamper(synthetic, tmp_path / "o", kind="inpaint", seed=1)
     changed, mask, record = check_edit(synthetic, out)
@@ -164,8 +165,8 @@ def test_same_seed_same_forgery(photo, synthetic, tmp_path):
 
 @pytest.mark.slow
 def test_remove_equals_a_render_without_the_object(synthetic, tmp_path):
-    from scenes import render
-    from scenes.tamper3d import render8, render_settings
+    from scenes.synthetic import render
+    from scenes.tamper.tamper3d import render8, render_settings
 
     before = folder_hash(synthetic)
     out = tamper(synthetic, tmp_path / "rm", kind="remove", seed=0)
@@ -189,7 +190,7 @@ def test_remove_equals_a_render_without_the_object(synthetic, tmp_path):
 
 @pytest.mark.slow
 def test_insert_adds_a_visible_object_and_keeps_the_totems(synthetic, tmp_path):
-    from scenes import render
+    from scenes.synthetic import render
 
     out = tamper(synthetic, tmp_path / "ins", kind="insert", seed=0)
     changed, mask, record = check_edit(synthetic, out)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from scenes.colour import linear_to_srgb, srgb_to_linear
-from verify import tone
+from verify.metrics import tone
 
 
 def _view(seed=0, shape=(80, 100)):

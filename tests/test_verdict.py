@@ -1,11 +1,12 @@
-"""verify.verdict: untouched-looking recons pass, a coloured square does not."""
+"""verify.verdict.verdict: untouched-looking recons pass, a coloured square does not."""
 
 import numpy as np
 import pytest
 
 from scenes.errors import BadInput
-from verify import patches, verdict
-from verify.report import verify_scene
+from verify.metrics import patches
+from verify.report.report import verify_scene
+from verify.verdict import verdict
 from verify_cases import (SQUARE, box_mask, make_fit, make_scene, points_in_box, texture,
                           with_square)
 
@@ -66,7 +67,7 @@ def test_a_photo_edited_more_never_scores_lower(monkeypatch):
     # the same square, then the same square and three more squares of a paler colour
     # over much of the view (39 % of the judged pixels): the more edited photo scores
     # at least as high at the same tone gains, and within 2 % when the edits move them
-    from verify import tone
+    from verify.metrics import tone
 
     photo = texture()
     one = with_square(photo)
@@ -161,8 +162,8 @@ def test_range_judges_only_where_the_totems_resolve_the_depth_well():
     # the left half's surface is established at a parallax of 5 (depth to a fifth), the
     # right half's at 20: UNSEEN judges both, RANGE (the view's colour at the pixel) the
     # right half only; ABSENT the protected pixels, whatever the map says
-    from verify.evidence import MIN_PARALLAX, Evidence
-    from verify.report import metric_pixels
+    from verify.metrics.evidence import MIN_PARALLAX, Evidence
+    from verify.report.report import metric_pixels
 
     H, W = 240, 320
     par = np.full((H, W), 5.0)

@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.cycles.blender_camera import opencv_from_blender
-from inverse.fit_files import pixels_read
-from scenes import camera, edits2d, folder
+from inverse.fit.files import pixels_read
+from scenes import camera, folder
+from scenes.masks import bbox
 
 __all__ = ["sphere_masks", "read_render", "write_untouched", "write_removed"]
 
@@ -100,7 +101,7 @@ def write_removed(render_dir, scene_dir, out, *, grow: int = 2,
     render differs by more than ``level`` of 255 in a channel, or lies within ``grow``
     px of the object's own pixels; the totem pixels stay the photo's, so the totems
     still see it (the preset ``remove``'s perfect forger). Within the band a fit reads
-    around the totems (:func:`inverse.fit_files.pixels_read`) only the object's own
+    around the totems (:func:`inverse.fit.files.pixels_read`) only the object's own
     pixels change, not the two renders' noise, so the copy shares its photo's fit unless
     the object lies there, as a forger's would. None when there is none.
 
@@ -132,7 +133,7 @@ def write_removed(render_dir, scene_dir, out, *, grow: int = 2,
                          "image_sha256": hashlib.sha256(src.read_bytes()).hexdigest()},
               "changed_pixels": int(changed.sum()),
               "changed_fraction": round(float(changed.mean()), 6),
-              "bbox": list(edits2d.bbox(changed)), "totems_edited": False}
+              "bbox": list(bbox(changed)), "totems_edited": False}
     truth = folder.read_truth(scene_dir)
     parts = folder.read_parts(scene_dir)
     extra = {k: v for k, v in parts.items() if k.startswith("truth/")

@@ -11,7 +11,7 @@ renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
 ``render.py``), then writes under DIR:
 
   cycles-<kind>-s<seed>/          the untouched scene folder (``convert.write_untouched``)
-  cycles-<kind>-s<seed>-<edit>/   2D edits of it by ``totems tamper`` (scenes.tamper)
+  cycles-<kind>-s<seed>-<edit>/   2D edits of it by ``totems tamper`` (scenes.tamper.tamper)
   cycles-<kind>-s<seed>-remove/   an object removed from the camera's view only: the
                                   photo outside the totems re-rendered by Cycles without
                                   it (``convert.write_removed``)
@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.cycles import convert, design  # noqa: E402
-from scenes import tamper  # noqa: E402
 from scenes.errors import BadInput  # noqa: E402
+from scenes.tamper import tamper  # noqa: E402
 
 PY = ROOT / ".venv-cycles" / "bin" / "python"
 

@@ -1,0 +1,10 @@
+"""What the photo and the totems say at each pixel: heatmaps, ray tests, evidence.
+
+`patches` compares the photo with the rebuilt view patch by patch (L1, SSIM, RANGE,
+CHROMA); `corroborate` (CORROB, UNSEEN) and `absence` (ABSENT) read the totem rays
+themselves; `evidence` says what the totems establish at each pixel, `resolution` how
+finely, `region` which part of the view is protected; `tone` brings the view to the
+photo's exposure first.
+
+May import: inverse, inverse.view, scenes.
+"""
