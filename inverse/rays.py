@@ -17,14 +17,10 @@ import numpy as np
 
 from scenes import camera
 from scenes.colour import srgb_to_linear
+from scenes.refraction import MIN_TRANSMITTANCE
 
 __all__ = ["TotemRays", "TotemPixels", "totem_pixels", "exit_rays", "refracted_rays",
            "MIN_TRANSMITTANCE"]
-
-MIN_TRANSMITTANCE = 0.05
-"""Rays whose Fresnel transmittance through both surfaces is below this are dropped: the
-glass sends back almost nothing of the scene along them."""
-
 
 @dataclass
 class TotemRays:

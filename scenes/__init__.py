@@ -2,9 +2,10 @@
 
 The modules here are the core every other room stands on: the scene folder and its files
 (`folder`, `files`, `jpeg`), the camera and a sphere's outline in it (`camera`,
-`silhouette`), colour (`colour`), selections of the image (`masks`), the working
-resolution (`working`), the Dr.Jit backend (`backend`) and the one bad-input error
-(`errors`). Around them: `synthetic` (presets rendered with Mitsuba, with their truth),
+`silhouette`), a glass sphere's refraction in numpy (`refraction`), what the totems see
+of the camera view and the parallax rule (`reach`), colour (`colour`), selections of the
+image (`masks`), the working resolution (`working`), the Dr.Jit backend (`backend`) and
+the one bad-input error (`errors`). Around them: `synthetic` (presets rendered with Mitsuba, with their truth),
 `channel` (what a camera and a messenger do to a photo), `tamper` (the manipulations) and
 `photo` (real photos: calibration, ingest, masks). Frames and units: docs/contract.md.
 

@@ -19,13 +19,15 @@ from scenes.files import (IMAGE_FORMATS, MAX_FILE_BYTES, MAX_PIXELS, read_calib,
                           read_image, read_mask, safe_load_npy, staged_folder, write_bytes,
                           write_calib, write_image, write_json, write_npy, write_npz)
 from scenes.jpeg import JpegInfo
+from scenes.reach import Reach
 
 __all__ = ["MAX_PIXELS", "MAX_FILE_BYTES", "IMAGE_FORMATS", "read_image", "read_mask",
            "write_image", "write_bytes", "write_json", "write_npy", "write_npz",
            "staged_folder", "safe_load_npy", "read_calib", "write_calib", "read_key",
            "expected_totems", "key_iors",
            "key_fingerprint", "Scene", "find_calib", "PHOTO_NAMES", "photo_path",
-           "read_jpeg_info", "read_parts", "read_scene", "Truth", "read_truth", "write_scene"]
+           "read_jpeg_info", "read_parts", "read_scene", "Truth", "read_truth", "read_reach",
+           "write_scene"]
 
 PHOTO_NAMES = ("image.png", "image.jpg", "image.jpeg")   # the photo: exactly one of them
 
@@ -258,6 +260,7 @@ class Truth:
     clean: np.ndarray            # (H, W, 3) sRGB [0, 1], the camera view without totems
     totem_pose: np.ndarray       # (n, 3) true centres, camera frame, metres
     scene: dict                  # everything needed to render the scene again
+    reach: Reach | None = None   # what the totems truly see (truth/reach.npz), if traced
 
 
 def read_truth(path) -> Truth | None:
@@ -274,7 +277,20 @@ def read_truth(path) -> Truth | None:
     pose = np.asarray(safe_load_npy(t / "totem_pose.npy"), dtype=float)
     scene = json.loads((t / "scene.json").read_text()) if (t / "scene.json").is_file() \
         else {}
-    return Truth(clean, pose, scene)
+    return Truth(clean, pose, scene, read_reach(t / "reach.npz"))
+
+
+def read_reach(path) -> Reach | None:
+    """``truth/reach.npz`` (:class:`scenes.reach.Reach`), or None when there is none."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return Reach.from_dict(z)
+    except Exception as exc:
+        raise BadInput(f"{path} is not a readable reach file "
+                       f"({exc.__class__.__name__})") from None
 
 
 def write_scene(out, *, image, K, masks, radius, ior, truth: Truth | None = None,
@@ -305,6 +321,8 @@ def write_scene(out, *, image, K, masks, radius, ior, truth: Truth | None = None
             write_image(tmp / "truth" / "clean.png", truth.clean)
             write_npy(tmp / "truth" / "totem_pose.npy", np.asarray(truth.totem_pose, float))
             write_json(tmp / "truth" / "scene.json", truth.scene)
+            if truth.reach is not None:
+                write_npz(tmp / "truth" / "reach.npz", **truth.reach.to_dict())
         for rel, data in (extra_files or {}).items():
             write_bytes(tmp / rel, data)
     return out

@@ -84,11 +84,23 @@ def read_working_scene(path) -> Scene:
 
 
 def working_truth(truth: Truth | None, pixels: int = WORKING_PIXELS) -> Truth | None:
-    """``truth`` with its clean view at the working resolution of a photo its size."""
+    """``truth`` with its clean view (and its reach) at the working resolution of a
+    photo its size: a block of the reach keeps the mean of its pixels' counts and
+    parallax, and is a backdrop or excluded where at least half its pixels are."""
     if truth is None:
         return None
     clean = np.asarray(truth.clean)
     f = working_factor((clean.shape[1], clean.shape[0]), pixels)
     if f == 1:
         return truth
-    return dataclasses.replace(truth, clean=block_mean(clean, f).astype(np.float32))
+    reach = truth.reach
+    if reach is not None:
+        with np.errstate(invalid="ignore"):
+            reach = dataclasses.replace(
+                reach, depth=block_mean(reach.depth, f).astype(np.float32),
+                n_totems=np.rint(block_mean(reach.n_totems, f)).astype(np.uint8),
+                parallax=block_mean(reach.parallax, f).astype(np.float32),
+                backdrop=block_mean(reach.backdrop, f) >= 0.5,
+                excluded=block_mean(reach.excluded, f) >= 0.5)
+    return dataclasses.replace(truth, clean=block_mean(clean, f).astype(np.float32),
+                               reach=reach)

@@ -220,11 +220,12 @@ def test_masks_benchmark_tells_an_imprecise_outline_from_a_missed_totem():
 
 
 def test_refraction_through_the_sphere_matches_inverse_sphere():
-    # scenes/photo/glass.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell
+    # scenes/refraction.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell
     # and Fresnel code): the same exit points and directions for rays across the sphere.
     from inverse import sphere
     from scenes import backend, camera
     from scenes.photo import glass
+    from scenes.refraction import entry_cosine, refract_sphere, transmittance
     backend.use()
     mi = backend.modules()[1]
     K = camera.intrinsics(640, 480, 60)
@@ -234,13 +235,15 @@ def test_refraction_through_the_sphere_matches_inverse_sphere():
     rng = np.random.default_rng(0)
     a, rho = rng.uniform(0, 2 * np.pi, 300), 0.9 * s * np.sqrt(rng.uniform(0, 1, 300))
     d = camera.pixel_rays(K, uv[0] + rho * np.cos(a), uv[1] + rho * np.sin(a))
-    E, d_out, valid = glass.refract_sphere(d, P, R, eta)
-    E2, d2, _, valid2 = sphere.totem_rays(mi.Point3f(0, 0, 0),
+    E, d_out, valid = refract_sphere(d, P, R, eta)
+    E2, d2, T2, valid2 = sphere.totem_rays(mi.Point3f(0, 0, 0),
                                           mi.Vector3f(*d.T.astype(np.float32)), P, R, eta)
     ok = np.asarray(valid2, bool)
     assert valid.all() and ok.sum() > 250
     assert np.allclose(E[ok], np.array(E2).reshape(3, -1).T[ok], atol=1e-6)
     assert np.allclose(d_out[ok], np.array(d2).reshape(3, -1).T[ok], atol=1e-5)
+    T = transmittance(entry_cosine(d, P, R), eta)        # Fresnel, against mi.fresnel's
+    assert np.allclose(T[ok], np.array(T2)[ok], atol=1e-5) and T.min() < 0.9 < T.max()
     # and the sphere the circle implies is the one it was drawn from
     assert np.allclose(glass.sphere_from_circle(uv[0], uv[1], s, K, R), P, atol=1e-9)
 

@@ -61,7 +61,10 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
     assert set(data["metrics"]) == {"patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
                                     "patch_ap_RANGE", "patch_ap_CORROB",
                                     "patch_ap_UNSEEN", "patch_ap_ABSENT", "recon_L1",
-                                    "pose_L1", "manip_judged"}
+                                    "pose_L1", "manip_judged", "reach_fraction",
+                                    "reach_judged", "judged_seen", "manip_in_reach",
+                                    "depth_error"}
+    assert data["metrics"]["reach_judged"] is None          # no truth/reach.npz
     # pose_L1 = mean over totems of sum |dP|: (0.01 + 0.03) / 2
     assert data["metrics"]["pose_L1"] == pytest.approx(0.02, abs=1e-6)
     # recon_L1 over protected non-totem pixels, computed here by hand
@@ -106,7 +109,9 @@ def test_metrics_are_null_without_ground_truth():
                                        "patch_ap_CORROB": None,
                                        "patch_ap_UNSEEN": None, "patch_ap_ABSENT": None,
                                        "recon_L1": None, "pose_L1": None,
-                                       "manip_judged": None}
+                                       "manip_judged": None, "reach_fraction": None,
+                                       "reach_judged": None, "judged_seen": None,
+                                       "manip_in_reach": None, "depth_error": None}
     assert rep.to_json()["totems"][0]["mask_iou"] > 0.98     # true centres, true masks
 
 

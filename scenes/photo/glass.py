@@ -11,9 +11,7 @@ ball or a ring of texture shows something else.
 
 Frames and units: the OpenCV camera frame (+x right, +y down, +z forward), metres;
 pixels (u, v) with pixel centres at integers. Colours are the photo's sRGB in [0, 1].
-This module is the numpy twin of :func:`inverse.sphere.totem_rays` (no Dr.Jit, since
-``scenes`` imports nothing of ``inverse``; ``tests/test_detect_masks.py`` checks the two
-agree).
+The rays go through the sphere by :func:`scenes.refraction.refract_sphere`.
 """
 
 from __future__ import annotations
@@ -21,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from scenes import camera
+from scenes.refraction import refract_sphere
 
-__all__ = ["sphere_from_circle", "refract_sphere", "RHO_MAX", "DEPTHS", "SIGMA_PX",
+__all__ = ["sphere_from_circle", "RHO_MAX", "DEPTHS", "SIGMA_PX",
            "SIGMA_INSIDE_PX", "disc_pattern", "glass_scores", "outline_scores"]
 
 RHO_MAX = 0.85
@@ -50,41 +49,6 @@ def sphere_from_circle(u0: float, v0: float, s: float, K, R: float) -> np.ndarra
     axis = camera.pixel_rays(K, np.float64(u0), np.float64(v0))
     alpha = np.arctan(abs(float(s)) / K[0, 0])
     return axis * (R / np.sin(alpha))
-
-
-def refract_sphere(d, P, R: float, eta: float):
-    """Camera rays from the origin along unit ``d`` (m, 3) through a glass sphere:
-    centre ``P`` (3,) or one per ray (m, 3), metres; radius ``R`` metres; index of
-    refraction ``eta`` = n_glass / n_air.
-
-    Snell's law in vector form at entry ``D`` and exit ``E`` (paper, Eqs. 1-6):
-    ``t = r d + (r c - sqrt(1 - r^2 (1 - c^2))) N`` with ``N`` the normal facing the
-    incoming ray, ``c = -d.N``, ``r = n_from / n_to``. Reflections are ignored.
-
-    Returns
-    -------
-    E : (m, 3) exit points, metres.
-    d_out : (m, 3) unit exit directions.
-    valid : (m,) bool, the ray meets the sphere in front of the camera.
-    """
-    d = np.asarray(d, np.float64)
-    P = np.asarray(P, np.float64)
-    b = (d * P).sum(-1)                         # ray parameter of the closest approach
-    l2 = np.maximum((P * P).sum(-1) - b * b, 0.0)  # squared distance of the line from P
-    valid = (l2 < R * R) & (b > 0)
-    h = np.sqrt(np.maximum(R * R - l2, 0.0))
-    D = (b - h)[:, None] * d                    # entry point
-    N1 = (D - P) / R                            # outward normal at D (faces the ray)
-    cos_i = np.clip(-(d * N1).sum(1), 0.0, 1.0)
-    r = 1.0 / eta
-    cos_t = np.sqrt(np.maximum(1.0 - r * r * (1.0 - cos_i ** 2), 0.0))
-    d_mid = r * d + (r * cos_i - cos_t)[:, None] * N1
-    E = D + (2.0 * R * cos_t)[:, None] * d_mid  # chord of length 2 R cos_t
-    N2 = (E - P) / R                            # outward; -N2 faces the ray inside
-    # inside to outside: r = eta, c = d_mid . N2 = cos_t, the exit angle equals cos_i
-    d_out = eta * d_mid - (eta * cos_t - cos_i)[:, None] * N2
-    d_out /= np.linalg.norm(d_out, axis=1, keepdims=True)
-    return E, d_out, valid
 
 
 def disc_pattern(n_points: int = 256) -> np.ndarray:

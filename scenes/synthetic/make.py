@@ -14,7 +14,7 @@ import numpy as np
 
 from scenes import folder
 from scenes.errors import BadInput
-from scenes.synthetic import presets, render
+from scenes.synthetic import presets, render, trace
 from scenes.synthetic.preset_parts import sphere_outline
 
 __all__ = ["make_scene", "hidden_totems"]
@@ -55,7 +55,8 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     Returns
     -------
     Path of the folder, holding image.png, calib.npy, totem_masks/, totems.json and
-    truth/ (clean.png, totem_pose.npy, scene.json with the description and timings).
+    truth/ (clean.png, totem_pose.npy, scene.json with the description and timings,
+    reach.npz: what the totems truly see, :func:`scenes.synthetic.trace.truth_reach`).
     """
     out = Path(out)
     if n_totems is not None and int(n_totems) < 1:
@@ -101,9 +102,13 @@ def make_scene(out, *, preset: str = "box", seed: int = 1, size=(640, 480),
     order = np.argsort([np.nonzero(m)[1].mean() for m in masks], kind="stable")
     masks = masks[order]
     pose = np.array([t["center"] for t in desc["totems"]], float)[order]
+    t0 = time.perf_counter()
+    reach, _ = trace.truth_reach(desc)
+    reach.spacing = reach.spacing[order]
+    timings["reach_s"] = round(time.perf_counter() - t0, 2)
     record = dict(desc, spp=int(spp), sampler=render.sampler_type(spp),
                   sampler_seed=sampler_seed, timings=timings, **extra)
-    truth = folder.Truth(clean=clean, totem_pose=pose, scene=record)
+    truth = folder.Truth(clean=clean, totem_pose=pose, scene=record, reach=reach)
     radius, ior = _key(desc["totems"], order)
     return folder.write_scene(out, image=image, K=np.asarray(desc["K"], float),
                               masks=masks, radius=radius, ior=ior, truth=truth)

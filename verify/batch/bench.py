@@ -36,6 +36,7 @@ from scenes.synthetic.presets import DEFAULT_PLACEMENT
 from verify.batch.batch import Engine
 from verify.batch.runs import Run, fingerprint, run_all
 from verify.metrics.patches import METRICS
+from verify.metrics.truth import TRUTH_METRICS
 from verify.verdict.verdict import THRESHOLDS
 
 __all__ = ["PAPER_TABLE1", "PAPER_TABLE2", "PAPER_TOTEMS", "MODES", "find_scenes",
@@ -307,7 +308,8 @@ def markdown(bench: dict) -> str:
 CSV_FIELDS = ["name", "preset", "placement", "kind", "n_totems", "mode", "status", "verdict",
               "score", "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
               "judged_fraction", "manip_judged", "holdout_L1", "unverifiable_reason",
-              *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error"]
+              *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error",
+              *(m for m in TRUTH_METRICS if m not in ("recon_L1", "pose_L1"))]
 
 
 def csv_text(runs: list[dict]) -> str:

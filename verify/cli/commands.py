@@ -36,6 +36,14 @@ def _progress(args) -> bool:
     return not args.quiet and sys.stderr.isatty()
 
 
+def cmd_scene_reach(args) -> dict:
+    from scenes.synthetic.trace import write_reach
+
+    t0 = time.perf_counter()
+    written = [str(write_reach(s)) for s in args.scenes]
+    return {"written": written, "seconds": round(time.perf_counter() - t0, 2)}
+
+
 def cmd_scene_make(args) -> dict:
     from scenes.synthetic.make import make_scene
 
@@ -236,8 +244,9 @@ def _print_summary(verb: str, summary: dict) -> None:
         print(f"masks: {summary['n']} totems ({how}); check them in {summary['check']}")
     else:
         where = next((summary[k] for k in (verb, "scene", "fit", "bench", "calib",
-                                           "crosscheck", "check") if k in summary), "")
-        print(f"{verb}: wrote {where}")
+                                           "crosscheck", "check", "written")
+                      if k in summary), "")
+        print(f"{verb}: wrote {', '.join(where) if isinstance(where, list) else where}")
 
 
 # --------------------------------------------------------------------------- parser
@@ -294,6 +303,10 @@ def _scene_verbs(verb, sub) -> None:
     v = verb("make", cmd_scene_make, "render a synthetic totem-protected scene folder",
              scene_sub)
     arguments.scene_make(v)
+    v = verb("reach", cmd_scene_reach, "trace what the totems of synthetic scene folders "
+             "truly see into truth/reach.npz (scene make writes it; for folders made "
+             "before)", scene_sub)
+    v.add_argument("scenes", nargs="+", metavar="scene")
 
     v = verb("tamper", cmd_tamper, "write a manipulated copy of a scene folder")
     v.add_argument("scene")

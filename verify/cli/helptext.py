@@ -19,6 +19,7 @@ EXAMPLES = {
     "totems": "totems check scenes/IMG_0001        # fit, re-render, judge one photo",
     "scene": "totems scene make box1 --preset box --seed 1",
     "make": "totems scene make box1 --preset box --seed 1 --size 640x480",
+    "reach": "totems scene reach set/*           # truth/reach.npz of each",
     "tamper": "totems tamper box1 box1-color --kind color --seed 0",
     "recapture": "totems recapture box1 box1-jpeg75 --jpeg 75 --long-side 480",
     "fit": "totems fit box1 --out box1-out",

@@ -4,7 +4,8 @@
 CHROMA); `corroborate` (CORROB, UNSEEN) and `absence` (ABSENT) read the totem rays
 themselves; `evidence` says what the totems establish at each pixel, `resolution` how
 finely, `region` which part of the view is protected; `tone` brings the view to the
-photo's exposure first.
+photo's exposure first; `truth` reads a synthetic scene's truth (the true view, pose,
+depth and reach) for the metrics, never for the verdict.
 
 May import: inverse, inverse.view, scenes.
 """

@@ -57,6 +57,7 @@ from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
 from inverse.view.sweep import slice_colours
 from scenes.colour import linear_to_srgb
+from scenes.reach import COS_EVIDENCE
 from verify.metrics.patches import chroma
 from verify.metrics.resolution import blur_varying
 
@@ -74,10 +75,6 @@ N_SLICES = 64
 
 SIGMA_CELLS = 1.5
 """Gaussian spread (cells) of each ray's splat; the photo is blurred to match."""
-
-COS_EVIDENCE = 0.3
-"""Rays that entered their sphere at an incidence cosine below this are left out: near
-the rim the glass mixes in reflection and blurs."""
 
 MIN_TOTEMS = 2
 """How many totems must see the photo's hue at one depth: one can match by chance along

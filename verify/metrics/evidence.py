@@ -9,8 +9,10 @@ where, at some depth along its ray:
 - at least ``MIN_TOTEMS`` totems' rays pass (one sees any colour it likes),
 - two of them see the point from far enough apart that its depth is fixed: their
   *parallax*, the angle at the point between the totems' centres divided by their
-  rays' angular spacing (:func:`angular_spacing`), is at least ``MIN_PARALLAX``
-  (triangulated from two totems, a depth is known to about ``1 / parallax`` of itself),
+  rays' angular spacing (:func:`scenes.reach.angular_spacing`), is at least
+  ``MIN_PARALLAX`` (triangulated from two totems, a depth is known to about
+  ``1 / parallax`` of itself; the rule is :mod:`scenes.reach`'s, which also gives the
+  truth's reach of a synthetic scene),
 - and they agree on what they see there (the spread of their sRGB colours at most
   ``AGREE``): they saw one surface.
 
@@ -43,33 +45,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
 from scenes.camera import pixel_rays
+from scenes.reach import (COS_EVIDENCE, MIN_PARALLAX, MIN_TOTEMS, angular_spacing,
+                          pair_parallax)
 from verify.metrics.corroborate import cell_centres, ray_slices
 
 __all__ = ["MIN_TOTEMS", "MIN_PARALLAX", "AGREE", "COS_EVIDENCE", "Evidence",
            "angular_spacing", "pair_parallax", "slice_parallax", "evidence_map"]
 
-MIN_TOTEMS = 2
-"""Totems that must see a surface for its pixels to be judged: one sees any colour."""
-
-MIN_PARALLAX = 4.0
-"""Parallax (rays' angular spacings) at which a surface's depth counts as resolved:
-triangulated to about a quarter of its distance."""
-
 AGREE = 0.03
 """Largest spread (sRGB, root mean square over the landing totems and the channels) at
 which the totems at a point are taken to see one surface there: 0.02 and 0.05 each
 separated the development set's edits less (see docs/decisions.md)."""
-
-COS_EVIDENCE = 0.3
-"""Rays that entered their sphere at an incidence cosine below this are not evidence:
-near the rim the glass mixes in reflection and blurs (as
-:mod:`verify.metrics.corroborate`)."""
-
 
 @dataclass
 class Evidence:
@@ -89,52 +79,6 @@ class Evidence:
     parallax: np.ndarray
     resolved: np.ndarray
     spacing: np.ndarray
-
-
-def angular_spacing(d: np.ndarray, totem: np.ndarray, n: int) -> np.ndarray:
-    """Median angle (radians) between each totem's ray directions and their nearest
-    neighbour: the totem's angular resolution. ``d`` (m, 3) unit, ``totem`` (m,) in
-    ``range(n)``; NaN for a totem with fewer than two rays."""
-    out = np.full(n, np.nan)
-    for j in range(n):
-        dj = d[totem == j]
-        if len(dj) >= 2:
-            dist, _ = cKDTree(dj).query(dj, k=2)
-            out[j] = 2.0 * np.arcsin(np.clip(np.median(dist[:, 1]) / 2.0, 0.0, 1.0))
-    return out
-
-
-def pair_parallax(X: np.ndarray, centers: np.ndarray, spacing: np.ndarray,
-                  seen: np.ndarray) -> np.ndarray:
-    """Largest parallax between two totems that see each point.
-
-    Parameters
-    ----------
-    X : (k, 3) camera-frame points, metres.
-    centers : (n, 3) totem centres, metres.
-    spacing : (n,) each totem's angular spacing, radians.
-    seen : (n, k) bool, which totems see each point.
-
-    Returns
-    -------
-    (k,) the largest over pairs (i, j) seeing the point of the angle at ``X`` between
-    ``centers[i]`` and ``centers[j]`` divided by the pair's mean spacing; 0 where fewer
-    than two totems see it.
-    """
-    X = np.asarray(X, np.float64)
-    to_c = np.asarray(centers, np.float64)[:, None, :] - X[None]           # (n, k, 3)
-    to_c /= np.maximum(np.linalg.norm(to_c, axis=-1, keepdims=True), 1e-12)
-    best = np.zeros(len(X))
-    n = len(centers)
-    for i in range(n):
-        for j in range(i + 1, n):
-            scale = 0.5 * (spacing[i] + spacing[j])
-            if not np.isfinite(scale) or scale <= 0:
-                continue
-            cos = np.clip((to_c[i] * to_c[j]).sum(-1), -1.0, 1.0)
-            p = np.where(seen[i] & seen[j], np.arccos(cos) / scale, 0.0)
-            best = np.maximum(best, p)
-    return best
 
 
 def slice_parallax(sc, frame, centers: np.ndarray, spacing: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from scenes.camera import sphere_silhouette
 from scenes.errors import BadInput
 from verify.metrics import absence, corroborate, evidence, patches, region
 from verify.metrics import resolution, tone
+from verify.metrics.truth import truth_metrics
 from verify.report import html_report
 from verify.report.findings import Report
 from verify.verdict import verdict as verdict_mod
@@ -58,7 +59,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     fit : a FitResult (or anything with ``recon`` (H, W, 3) sRGB [0, 1],
         ``totem_points`` (m, 3) camera frame m, ``centers`` (n, 3), ``initial`` (n, 3)
         or None, optional ``timings`` dict).
-    truth : ground truth of a synthetic scene, for recon_L1 and pose_L1 (else null).
+    truth : ground truth of a synthetic scene, for the metrics read off it
+        (:func:`verify.metrics.truth.truth_metrics`; else null).
     thresholds : {metric: scale} overriding ``verdict.THRESHOLDS``.
     calibration : the verdict's calibration (:func:`verify.verdict.verdict.decide`): the
         shipped one by default, a :class:`verify.verdict.calibration.Calibration`, or None.
@@ -120,14 +122,10 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         labels = patches.patch_labels(scene.manip_mask, grid)
         for name in heat:
             metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
-    if truth is not None:
-        clean = np.asarray(truth.clean, dtype=np.float64)
-        if clean.shape == image.shape and seen.any():
-            metrics["recon_L1"] = float(np.abs(fitted - clean).mean(axis=2)[seen].mean())
-        true_pose = np.asarray(truth.totem_pose, dtype=np.float64)
-        if true_pose.shape == np.shape(fit.centers):
-            metrics["pose_L1"] = float(np.abs(np.asarray(fit.centers, float) - true_pose)
-                                       .sum(axis=1).mean())
+    metrics.update(truth_metrics(truth, fitted=fitted, centers=fit.centers, seen=seen,
+                                 judged=judged, totem_mask=totem_mask,
+                                 manip=scene.manip_mask,
+                                 depth=getattr(fit, "recon_depth", None)))
 
     totems, silhouettes = _totems(scene, fit)
 
