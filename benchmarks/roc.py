@@ -20,7 +20,12 @@ the shipped one: p-value below its alpha), prints:
   caught at the verdict's line (an unverifiable edit is missed);
 - per kind, the edits caught by how much of the edit the totems establish (the share
   of its pixels the verdict judges, ``metrics.manip_judged``): what a user may expect
-  of an edit inside the report's judged region, and what lies outside it.
+  of an edit inside the report's judged region, and what lies outside it; and by the
+  share of the edit in the truth's reach (``metrics.manip_in_reach``): what physics
+  allows, which no fit can shrink;
+- per preset and placement, what the truth's reach says of the evidence map (the
+  reach's share of the photo, the share of it judged, the share of the judged two
+  totems truly see, the view's depth error over it).
 
 ``--thresholds RANGE=T,UNSEEN=T,ABSENT=T`` judges the runs at other thresholds than
 those they were verified at, from each run's per-metric scores (:func:`rejudge`; the
@@ -188,7 +193,9 @@ def tables(rows: list[dict], cal) -> str:
                        f"| {_rate(r['statistic'] > line for r in rs)} | "
                        f"{auc} | " + " | ".join(aps) + " |")
     return "\n".join(out + [""] + _by_preset(untouched, edited) + [""]
-                     + by_coverage(edited))
+                     + by_coverage(edited) + [""]
+                     + by_coverage(edited, "manip_in_reach", "in the truth's reach")
+                     + [""] + by_reach(rows))
 
 
 def _by_preset(untouched: list[dict], edited: list[dict]) -> list[str]:
@@ -222,24 +229,51 @@ COVERAGE_BINS = (0.0, 0.25, 0.5, 1.0)
 """Edges of the bins of an edit's judged share (the last bin holds 1)."""
 
 
-def by_coverage(edited: list[dict]) -> list[str]:
+def by_coverage(edited: list[dict], key: str = "manip_judged",
+                what: str = "judged") -> list[str]:
     """Markdown rows: per kind, the edits caught at the verdict's line in each bin of
-    the share of the edit's pixels the verdict judged (``metrics.manip_judged``; an
-    edit with no judged share is left out), with the binomial interval."""
+    a share of the edit's pixels (``metrics.<key>``: by default the share the verdict
+    judged; ``manip_in_reach`` the share in the truth's reach), with the binomial
+    interval; an edit without that share is left out."""
     edges = COVERAGE_BINS
     n_bins = len(edges) - 1
-    names = [f"{100 * lo:g}-{100 * hi:g} % judged" if hi < 1 else f"{100 * lo:g} % or more"
+    names = [f"{100 * lo:g}-{100 * hi:g} % {what}" if hi < 1 else f"{100 * lo:g} % or more"
              for lo, hi in zip(edges[:-1], edges[1:])]
-    out = ["| caught, by the share of the edit judged | " + " | ".join(names) + " |",
+    out = [f"| caught, by the share of the edit {what} | " + " | ".join(names) + " |",
            "|---|" + "---|" * n_bins]
     for kind in sorted({r["kind"] for r in edited}):
         by_bin = [[] for _ in range(n_bins)]
         for r in edited:
-            judged = (r.get("metrics") or {}).get("manip_judged")
-            if r["kind"] == kind and judged is not None:
-                i = int(np.searchsorted(edges, float(judged), side="right")) - 1
+            share = (r.get("metrics") or {}).get(key)
+            if r["kind"] == kind and share is not None:
+                i = int(np.searchsorted(edges, float(share), side="right")) - 1
                 by_bin[min(i, n_bins - 1)].append(_called(r))
         out.append(f"| {kind} | " + " | ".join(_rate(b) for b in by_bin) + " |")
+    return out
+
+
+REACH_FIGURES = ("reach_fraction", "reach_judged", "judged_seen", "depth_error")
+
+
+def by_reach(rows: list[dict]) -> list[str]:
+    """Markdown rows: per preset and placement, the medians (and the photos that have
+    them) of what the truth's reach says of the evidence map: the reach's share of the
+    photo, the share of it judged, the share of the judged that two totems truly see,
+    and the view's median relative depth error over it (``verify.metrics.truth``)."""
+    by = defaultdict(list)
+    for r in rows:
+        if (r.get("metrics") or {}).get("reach_fraction") is not None:
+            by[_key(r, "placement")].append(r["metrics"])
+    if not by:
+        return []
+    out = ["| truth's reach, medians | photos | " + " | ".join(REACH_FIGURES) + " |",
+           "|---|---|" + "---|" * len(REACH_FIGURES)]
+    for k, ms in sorted(by.items()) + [("all", [m for v in by.values() for m in v])]:
+        cells = []
+        for f in REACH_FIGURES:
+            v = [m[f] for m in ms if m.get(f) is not None]
+            cells.append(f"{np.median(v):.2f}" if v else "–")
+        out.append(f"| {k} | {len(ms)} | " + " | ".join(cells) + " |")
     return out
 
 

@@ -114,3 +114,21 @@ def test_edits_caught_by_the_share_of_the_edit_judged():
     assert cells[0].startswith("1 of 2") and cells[1].startswith("0 of 1")
     assert cells[2].startswith("2 of 2")            # 1.0 falls in the last bin
     assert splice.split(" | ")[1:][2].startswith("0 of 1") and "–" in splice
+
+
+def test_edits_caught_by_the_share_in_the_truths_reach_and_the_reach_by_preset():
+    def run(share, verdict, preset="box"):
+        return {"kind": "remove", "verdict": verdict, "preset": preset,
+                "metrics": {"manip_in_reach": share, "reach_fraction": 0.6,
+                            "reach_judged": share, "judged_seen": 0.9,
+                            "depth_error": 0.1 if share is not None else None}}
+    edited = [run(0.1, "consistent"), run(0.7, "inconsistent"), run(0.9, "consistent")]
+    header, _, remove = roc.by_coverage(edited, "manip_in_reach", "in the truth's reach")
+    assert header.startswith("| caught, by the share of the edit in the truth's reach")
+    cells = remove.split(" | ")[1:]
+    assert cells[0].startswith("0 of 1") and cells[2].startswith("1 of 2")
+    rows = roc.by_reach(edited + [run(None, "consistent", "envmap")])
+    assert rows[0].split(" | ")[2:] == list(roc.REACH_FIGURES[:-1]) + ["depth_error |"]
+    box = next(r for r in rows if r.startswith("| box floating"))
+    assert box.split(" | ")[1:4] == ["3", "0.60", "0.70"]   # photos, medians
+    assert roc.by_reach([{"kind": "none", "metrics": {}}]) == []
