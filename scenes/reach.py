@@ -5,8 +5,9 @@ A totem sees a surface point where one of its rays, refracted through the glass 
 on into the scene, lands on it. Given where the camera's pixels land (their surface
 points) and where the totems' rays land, both traced by some renderer through the same
 scene, a pixel is *seen* by a totem when one of its rays lands within that ray's
-footprint of the pixel's point: the ray's path length times its own angular spacing (to
-its fourth nearest neighbour), widened where the ray meets the surface obliquely. A pixel
+footprint of the pixel's point: an ellipse on the surface, the ray's path length times
+its own angular spacing (to its fourth nearest neighbour) across, stretched by the
+incidence along (:func:`_in_footprints`). A pixel
 whose camera ray leaves the scene (a backdrop at infinity) is seen by a totem with a ray
 along the same direction, within its spacing. The *parallax* between two totems that see
 a point is the angle at the point between their centres in units of their mean spacing
@@ -43,9 +44,10 @@ COS_EVIDENCE = 0.3
 """Rays that entered their sphere at an incidence cosine below this are not evidence:
 near the rim the glass mixes in reflection and blurs, and each ray's footprint is wide."""
 
-MIN_COS_FOOTPRINT = 0.2
-"""A ray's footprint grows as ``1 / cos`` of its angle to the surface, to this cosine at
-most (a grazing ray's footprint is long and thin; a circle this wide covers it)."""
+MIN_COS_FOOTPRINT = 0.05
+"""A ray's footprint stretches as ``1 / cos`` along the surface it meets at incidence
+cosine ``cos``, to this cosine at most (a ray grazing a surface closer than 3 degrees
+sees only a smear of it)."""
 
 
 @dataclass
@@ -155,13 +157,43 @@ def _local_spacing(d: np.ndarray, totem: np.ndarray, n: int, k: int = 4) -> np.n
     return out
 
 
+def _in_footprints(X, Y, o, d, normal, spacing, k: int = 8) -> np.ndarray:
+    """(p,) bool: points ``X`` (p, 3) inside the footprint of one of the rays that left
+    ``o`` along ``d`` with angular ``spacing`` and landed at ``Y`` on a surface of unit
+    ``normal`` (each (m, 3) / (m,)).
+
+    A ray's footprint on the surface is an ellipse: ``r = t * spacing`` across the ray's
+    plane of incidence, ``r / cos`` along it (``t`` the path length, ``cos`` the
+    incidence cosine, held to ``MIN_COS_FOOTPRINT``); a point is in it where it lies on
+    that surface (within ``r`` of its plane) and inside the ellipse. The ``k`` nearest
+    landing points of each point are tried."""
+    t = np.linalg.norm(Y - o, axis=1)
+    cos = np.maximum(np.nan_to_num(np.abs((normal * d).sum(1))), MIN_COS_FOOTPRINT)
+    r = t * spacing
+    along = _unit(d - (d * normal).sum(1, keepdims=True) * normal)   # in the surface
+    across = np.cross(normal, along)
+    k = min(k, len(Y))
+    dist, idx = cKDTree(Y).query(X, k=k, distance_upper_bound=float(np.max(r / cos)))
+    dist, idx = dist.reshape(len(X), k), idx.reshape(len(X), k)
+    found = np.zeros(len(X), bool)
+    for c in range(k):
+        ok = np.isfinite(dist[:, c])
+        i = idx[ok, c]
+        delta = X[ok] - Y[i]
+        a = (delta * along[i]).sum(1) * cos[i] / r[i]
+        b = (delta * across[i]).sum(1) / r[i]
+        h = np.abs((delta * normal[i]).sum(1)) / r[i]
+        found[np.flatnonzero(ok)[(a * a + b * b <= 1.0) & (h <= 1.0)]] = True
+    return found
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
 def reach_map(view: np.ndarray, X: np.ndarray, excluded: np.ndarray, centers: np.ndarray,
               *, o: np.ndarray, d: np.ndarray, Y: np.ndarray, normal: np.ndarray,
-              totem: np.ndarray) -> Reach:
+              totem: np.ndarray, spacing: np.ndarray | None = None) -> Reach:
     """The reach of a photo's totems from where the camera's and the totems' rays land.
 
     Parameters
@@ -176,6 +208,9 @@ def reach_map(view: np.ndarray, X: np.ndarray, excluded: np.ndarray, centers: np
     Y : (m, 3) where each lands, metres; NaN where it leaves the scene.
     normal : (m, 3) the surface's unit normal there (either side; NaN where it left).
     totem : (m,) int, the totem each ray left, in ``range(n)``.
+    spacing : (n,) each totem's angular spacing (radians), the parallax's unit: by default
+        its rays' (:func:`angular_spacing`); given when the rays sample its pixels more
+        finely than one ray a pixel.
 
     Returns
     -------
@@ -187,7 +222,8 @@ def reach_map(view: np.ndarray, X: np.ndarray, excluded: np.ndarray, centers: np
     o, d, Y, normal = (np.asarray(a, np.float64) for a in (o, d, Y, normal))
     totem = np.asarray(totem, np.int64)
     n = len(centers)
-    spacing = angular_spacing(d, totem, n)
+    spacing = angular_spacing(d, totem, n) if spacing is None else \
+        np.asarray(spacing, np.float64)
     excluded = np.asarray(excluded, bool)
     pts = X.reshape(-1, 3)
     surface = np.isfinite(pts).all(1) & ~excluded.ravel()
@@ -202,15 +238,8 @@ def reach_map(view: np.ndarray, X: np.ndarray, excluded: np.ndarray, centers: np
         mine = totem == j
         landed = mine & np.isfinite(Y).all(1)
         if landed.any() and surface.any():
-            t = np.linalg.norm(Y[landed] - o[landed], axis=1)
-            cos = np.abs((normal[landed] * d[landed]).sum(1))
-            reach = t * local[landed] / np.maximum(np.nan_to_num(cos), MIN_COS_FOOTPRINT)
-            dist, k = cKDTree(Y[landed]).query(pts[surface], k=1,
-                                               distance_upper_bound=float(reach.max()))
-            ok = np.isfinite(dist)
-            hit = np.zeros(surface.sum(), bool)
-            hit[ok] = dist[ok] <= reach[k[ok]]
-            seen[j, surface] = hit
+            seen[j, surface] = _in_footprints(pts[surface], Y[landed], o[landed],
+                                              d[landed], normal[landed], local[landed])
         left = mine & ~np.isfinite(Y).all(1)
         if left.any() and far.any():
             dist, k = cKDTree(d[left]).query(view[far], k=1)
