@@ -23,8 +23,7 @@ import numpy as np
 from scenes import backend, camera, folder
 from scenes.errors import BadInput
 from scenes.reach import COS_EVIDENCE, Reach, reach_map
-from scenes.refraction import (MIN_TRANSMITTANCE, entry_cosine, refract_sphere,
-                               transmittance)
+from scenes.refraction import MIN_TRANSMITTANCE, exit_rays
 from scenes.synthetic.render import NOTHING, TOTEM_ID_BASE, load_scene, scene_dict, totem_id
 
 __all__ = ["TotemHits", "tracer", "camera_points", "totem_hits", "truth_reach", "write_reach"]
@@ -111,26 +110,16 @@ def camera_points(desc: dict, trace):
 
 def totem_hits(desc: dict, ids: np.ndarray, trace) -> TotemHits:
     """Every pixel of each totem's true image (``ids``, from :func:`camera_points`),
-    refracted through its sphere and traced on into the scene by ``trace``."""
-    K = np.asarray(desc["K"], np.float64)
-    parts = []
-    for j, t in enumerate(desc["totems"]):
-        v, u = np.nonzero(ids == totem_id(j))
-        if u.size == 0:
-            continue
-        dc = camera.pixel_rays(K, u, v)
-        P, R, eta = np.asarray(t["center"], np.float64), float(t["radius"]), float(t["ior"])
-        E, d_out, valid = refract_sphere(dc, P, R, eta)
-        cos_in = entry_cosine(dc, P, R)
-        parts.append((u[valid], v[valid], np.full(valid.sum(), j), E[valid], d_out[valid],
-                      transmittance(cos_in[valid], eta), cos_in[valid]))
-    if not parts:
-        e1, e3 = np.zeros(0), np.zeros((0, 3))
-        return TotemHits(e1.astype(int), e1.astype(int), e1.astype(int), e3, e3, e1, e1,
-                         e3, e3, e1.astype(int))
-    u, v, jt, o, d, T, cos_in = (np.concatenate(x) for x in zip(*parts))
-    Y, N, hit_id = trace(o + 1e-5 * d, d)
-    return TotemHits(u, v, jt, o, d, T, cos_in, Y, N, hit_id)
+    refracted through its sphere (:func:`scenes.refraction.exit_rays`) and traced on into
+    the scene by ``trace``."""
+    t = desc["totems"]
+    r = exit_rays(np.asarray(desc["K"], np.float64),
+                  [ids == totem_id(j) for j in range(len(t))],
+                  [x["center"] for x in t], [x["radius"] for x in t], [x["ior"] for x in t])
+    if len(r.u) == 0:
+        return TotemHits(*r, Y=r.o.copy(), normal=r.o.copy(), hit_id=r.u.copy())
+    Y, N, hit_id = trace(r.o + 1e-5 * r.d, r.d)
+    return TotemHits(*r, Y=Y, normal=N, hit_id=hit_id)
 
 
 def truth_reach(desc: dict, *, cos_min: float = COS_EVIDENCE) -> tuple[Reach, TotemHits]:
