@@ -60,7 +60,8 @@ def rendered(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cycles")
     (tmp / "desc.json").write_text(json.dumps(_desc()))
     r = subprocess.run([str(PY), str(ROOT / "benchmarks" / "cycles" / "render.py"),
-                        str(tmp / "out"), "--desc", str(tmp / "desc.json"), "--linear"],
+                        str(tmp / "out"), "--desc", str(tmp / "desc.json"), "--linear",
+                        "--depth"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     return tmp / "out"
@@ -88,6 +89,24 @@ def test_sphere_mask_is_the_analytic_silhouette(rendered):
     assert exact.sum() > 300                                 # a sphere of some size
     outline = exact ^ np.roll(exact, 1, 0) | exact ^ np.roll(exact, 1, 1)
     assert (exact != cycles).sum() <= 0.02 * outline.sum(), (exact != cycles).sum()
+
+
+def test_depth_is_the_first_surface_without_the_totems(rendered):
+    """render.py --depth: at the marker's pixel, the camera-frame z where that pixel
+    centre's ray meets the marker's sphere (in closed form); where the totem stands,
+    nothing (it is hidden, the world behind it empty)."""
+    rec = read_render(rendered)
+    depth = np.load(rendered / "depth.npy")
+    marker = rec["description"]["markers"][0]
+    P = rec["w2c"][:3, :3] @ np.asarray(marker["centre"]) + rec["w2c"][:3, 3]
+    u, v = np.rint(camera.project(rec["K"], P)).astype(int)
+    d = camera.pixel_rays(rec["K"], np.float64(u), np.float64(v))
+    b = d @ P
+    t = b - np.sqrt(b * b - (P @ P - marker["radius"] ** 2))
+    assert depth[v, u] == pytest.approx(t * d[2], rel=1e-5)
+    tu, tv = np.rint(camera.project(rec["K"], rec["centres"][0])).astype(int)
+    assert np.isinf(depth[tv, tu])
+    assert np.isfinite(depth).sum() < 0.05 * depth.size      # the marker alone
 
 
 def test_small_set_is_scene_folders(tmp_path):
