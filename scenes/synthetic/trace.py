@@ -14,7 +14,6 @@ the same rays).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,11 +34,8 @@ class TotemHits:
 
     Attributes
     ----------
-    u, v : (m,) int, the pixel (column, row).
-    totem : (m,) int, the sphere, as ``desc["totems"]`` orders them.
-    o, d : (m, 3) exit point on the sphere (metres) and unit direction into the scene.
-    T : (m,) Fresnel transmittance through both surfaces.
-    cos_in : (m,) incidence cosine where the camera ray entered.
+    u, v, totem, o, d, T, cos_in : as :class:`scenes.refraction.ExitRays` (the sphere
+        ``totem`` as ``desc["totems"]`` orders them).
     Y : (m, 3) where the ray lands, metres; NaN where it leaves the scene.
     normal : (m, 3) the surface's unit normal there; NaN where it left.
     hit_id : (m,) int, the object or light it lands on (:data:`NOTHING` for the
@@ -142,16 +138,11 @@ def write_reach(scene_dir) -> Path:
     folders made before ``scene make`` wrote it. A tampered copy holds its source's
     description, so it gets the source's reach: what its totems show."""
     scene_dir = Path(scene_dir)
-    path = scene_dir / "truth" / "scene.json"
-    if not path.is_file():
-        raise BadInput(f"no truth/scene.json in {scene_dir}: the truth's reach is traced "
-                       "in a synthetic scene made by `totems scene make`")
-    try:
-        desc = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise BadInput(f"{path} is not valid JSON ({exc})") from None
+    desc = folder.read_scene_json(scene_dir, missing="the truth's reach is traced in a "
+                                  "synthetic scene made by `totems scene make`")
     if "objects" not in desc or "totems" not in desc:
-        raise BadInput(f"{path} is not a Mitsuba scene description (a Cycles scene's "
+        raise BadInput(f"{scene_dir / 'truth' / 'scene.json'} is not a Mitsuba scene "
+                       "description (a Cycles scene's "
                        "reach is traced by benchmarks/cycles)")
     reach, _ = truth_reach(desc)
     pose = folder.safe_load_npy(scene_dir / "truth" / "totem_pose.npy")
