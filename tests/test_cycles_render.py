@@ -111,8 +111,8 @@ def test_depth_is_the_first_surface_without_the_totems(rendered):
 
 def test_small_set_is_scene_folders(tmp_path):
     """make_cycles_set.py --small: an untouched folder every reader takes, with exact
-    masks, true centres that project into them, and edited copies whose totem pixels
-    are the untouched photo's."""
+    masks, true centres that project into them, and the truth's reach; edited copies
+    whose totem pixels are the untouched photo's, with their source's reach."""
     from scenes import folder
 
     r = subprocess.run([str(ROOT / ".venv" / "bin" / "python"),
@@ -127,11 +127,16 @@ def test_small_set_is_scene_folders(tmp_path):
     uv = camera.project(scene.K, truth.totem_pose)
     for m, (u, v) in zip(scene.masks, uv):            # each centre inside its own mask
         assert m[int(round(v)), int(round(u))]
+    reach = truth.reach
+    assert np.array_equal(reach.excluded, scene.masks.any(axis=0)) and reach.in_reach().any()
     for kind in ("color", "splice", "remove"):
         edited = folder.read_scene(tmp_path / f"{name}-{kind}")
         totems = scene.masks.any(axis=0)
         assert edited.manip_mask.any() and not (edited.manip_mask & totems).any()
         assert np.array_equal(edited.image[totems], scene.image[totems])
+        theirs = folder.read_truth(tmp_path / f"{name}-{kind}").reach
+        for k, val in reach.to_dict().items():
+            np.testing.assert_array_equal(getattr(theirs, k), val)
 
 
 def test_ablation_switches_reach_blender():

@@ -143,7 +143,7 @@ def write_reach(scene_dir) -> Path:
     if "objects" not in desc or "totems" not in desc:
         raise BadInput(f"{scene_dir / 'truth' / 'scene.json'} is not a Mitsuba scene "
                        "description (a Cycles scene's "
-                       "reach is traced by benchmarks/cycles)")
+                       "reach is traced by Blender: benchmarks/cycles/truth_reach.py)")
     reach, _ = truth_reach(desc)
     pose = folder.safe_load_npy(scene_dir / "truth" / "totem_pose.npy")
     centers = np.array([t["center"] for t in desc["totems"]], np.float64)
