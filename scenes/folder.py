@@ -27,6 +27,7 @@ __all__ = ["MAX_PIXELS", "MAX_FILE_BYTES", "IMAGE_FORMATS", "read_image", "read_
            "expected_totems", "key_iors",
            "key_fingerprint", "Scene", "find_calib", "PHOTO_NAMES", "photo_path",
            "read_jpeg_info", "read_parts", "read_scene", "Truth", "read_truth", "read_reach",
+           "read_scene_json",
            "write_scene"]
 
 PHOTO_NAMES = ("image.png", "image.jpg", "image.jpeg")   # the photo: exactly one of them
@@ -278,6 +279,18 @@ def read_truth(path) -> Truth | None:
     scene = json.loads((t / "scene.json").read_text()) if (t / "scene.json").is_file() \
         else {}
     return Truth(clean, pose, scene, read_reach(t / "reach.npz"))
+
+
+def read_scene_json(scene_dir, *, missing: str) -> dict:
+    """``SCENE/truth/scene.json``, parsed; a :class:`BadInput` saying ``missing`` (what
+    would have made one) when there is none, and one when it is not JSON."""
+    path = Path(scene_dir) / "truth" / "scene.json"
+    if not path.is_file():
+        raise BadInput(f"no truth/scene.json in {scene_dir}: {missing}")
+    try:
+        return json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise BadInput(f"{path} is not valid JSON ({exc})") from None
 
 
 def read_reach(path) -> Reach | None:

@@ -12,9 +12,14 @@ ignored.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["MIN_TRANSMITTANCE", "refract_sphere", "entry_cosine", "transmittance"]
+from scenes.camera import pixel_rays
+
+__all__ = ["MIN_TRANSMITTANCE", "ExitRays", "refract_sphere", "entry_cosine",
+           "transmittance", "exit_rays"]
 
 MIN_TRANSMITTANCE = 0.05
 """Rays whose Fresnel transmittance through both surfaces is below this are dropped: the
@@ -80,3 +85,57 @@ def transmittance(cos_i, eta: float) -> np.ndarray:
     r_p = (eta * c - cos_t) / np.maximum(eta * c + cos_t, 1e-12)
     F = 0.5 * (r_s * r_s + r_p * r_p)
     return (1.0 - F) ** 2
+
+
+class ExitRays(NamedTuple):
+    """The totem pixels' camera rays leaving their spheres (:func:`exit_rays`): ``u``,
+    ``v`` (m,) int the pixel (column, row); ``totem`` (m,) int the sphere; ``o`` (m, 3)
+    the exit point, metres; ``d`` (m, 3) the unit direction into the scene; ``T`` (m,) the
+    Fresnel transmittance through both surfaces; ``cos_in`` (m,) the incidence cosine
+    where the camera ray entered."""
+
+    u: np.ndarray
+    v: np.ndarray
+    totem: np.ndarray
+    o: np.ndarray
+    d: np.ndarray
+    T: np.ndarray
+    cos_in: np.ndarray
+
+
+def exit_rays(K, masks, centers, radius, ior, *, supersample: int = 1) -> ExitRays:
+    """Every pixel of each totem's image, its camera ray refracted through the sphere.
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics, pixels.
+    masks : (n, H, W) bool, each totem's pixels (the pixels whose ray meets it first).
+    centers : (n, 3) sphere centres, camera frame, metres.
+    radius, ior : scalars, or (n,) one per sphere: metres, ``n_glass / n_air``.
+    supersample : ``s``: s x s rays a pixel, through the centres of its s x s sub-pixels
+        (``u``, ``v`` the pixel each came from).
+
+    Returns
+    -------
+    :class:`ExitRays`, totem by totem, each in row-major pixel order; a pixel whose ray
+    misses its sphere (a mask wider than the sphere) is left out.
+    """
+    n = len(masks)
+    centers = np.asarray(centers, np.float64).reshape(n, 3)
+    radius = np.broadcast_to(np.asarray(radius, np.float64), (n,))
+    ior = np.broadcast_to(np.asarray(ior, np.float64), (n,))
+    parts = [(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)),
+              np.zeros((0, 3)), np.zeros(0), np.zeros(0))]
+    s = int(supersample)
+    sub_px = (np.arange(s) + 0.5) / s - 0.5
+    du, dv = (x.ravel() for x in np.meshgrid(sub_px, sub_px))
+    for j in range(n):
+        v, u = np.nonzero(masks[j])
+        u, v = np.repeat(u, s * s), np.repeat(v, s * s)
+        k = len(u) // (s * s)
+        dc = pixel_rays(K, u + np.tile(du, k), v + np.tile(dv, k)).reshape(-1, 3)
+        E, d_out, valid = refract_sphere(dc, centers[j], float(radius[j]), float(ior[j]))
+        cos_in = entry_cosine(dc, centers[j], float(radius[j]))[valid]
+        parts.append((u[valid], v[valid], np.full(int(valid.sum()), j), E[valid],
+                      d_out[valid], transmittance(cos_in, float(ior[j])), cos_in))
+    return ExitRays(*(np.concatenate(x) for x in zip(*parts)))

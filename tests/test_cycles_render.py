@@ -60,7 +60,8 @@ def rendered(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cycles")
     (tmp / "desc.json").write_text(json.dumps(_desc()))
     r = subprocess.run([str(PY), str(ROOT / "benchmarks" / "cycles" / "render.py"),
-                        str(tmp / "out"), "--desc", str(tmp / "desc.json"), "--linear"],
+                        str(tmp / "out"), "--desc", str(tmp / "desc.json"), "--linear",
+                        "--depth"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     return tmp / "out"
@@ -90,10 +91,28 @@ def test_sphere_mask_is_the_analytic_silhouette(rendered):
     assert (exact != cycles).sum() <= 0.02 * outline.sum(), (exact != cycles).sum()
 
 
+def test_depth_is_the_first_surface_without_the_totems(rendered):
+    """render.py --depth: at the marker's pixel, the camera-frame z where that pixel
+    centre's ray meets the marker's sphere (in closed form); where the totem stands,
+    nothing (it is hidden, the world behind it empty)."""
+    rec = read_render(rendered)
+    depth = np.load(rendered / "depth.npy")
+    marker = rec["description"]["markers"][0]
+    P = rec["w2c"][:3, :3] @ np.asarray(marker["centre"]) + rec["w2c"][:3, 3]
+    u, v = np.rint(camera.project(rec["K"], P)).astype(int)
+    d = camera.pixel_rays(rec["K"], np.float64(u), np.float64(v))
+    b = d @ P
+    t = b - np.sqrt(b * b - (P @ P - marker["radius"] ** 2))
+    assert depth[v, u] == pytest.approx(t * d[2], rel=1e-5)
+    tu, tv = np.rint(camera.project(rec["K"], rec["centres"][0])).astype(int)
+    assert np.isinf(depth[tv, tu])
+    assert np.isfinite(depth).sum() < 0.05 * depth.size      # the marker alone
+
+
 def test_small_set_is_scene_folders(tmp_path):
     """make_cycles_set.py --small: an untouched folder every reader takes, with exact
-    masks, true centres that project into them, and edited copies whose totem pixels
-    are the untouched photo's."""
+    masks, true centres that project into them, and the truth's reach; edited copies
+    whose totem pixels are the untouched photo's, with their source's reach."""
     from scenes import folder
 
     r = subprocess.run([str(ROOT / ".venv" / "bin" / "python"),
@@ -108,11 +127,16 @@ def test_small_set_is_scene_folders(tmp_path):
     uv = camera.project(scene.K, truth.totem_pose)
     for m, (u, v) in zip(scene.masks, uv):            # each centre inside its own mask
         assert m[int(round(v)), int(round(u))]
+    reach = truth.reach
+    assert np.array_equal(reach.excluded, scene.masks.any(axis=0)) and reach.in_reach().any()
     for kind in ("color", "splice", "remove"):
         edited = folder.read_scene(tmp_path / f"{name}-{kind}")
         totems = scene.masks.any(axis=0)
         assert edited.manip_mask.any() and not (edited.manip_mask & totems).any()
         assert np.array_equal(edited.image[totems], scene.image[totems])
+        theirs = folder.read_truth(tmp_path / f"{name}-{kind}").reach
+        for k, val in reach.to_dict().items():
+            np.testing.assert_array_equal(getattr(theirs, k), val)
 
 
 def test_ablation_switches_reach_blender():

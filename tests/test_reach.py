@@ -12,17 +12,13 @@ import sys
 import numpy as np
 import pytest
 
+from reach_cases import (BOX_C, BOX_H, ETA, H, K, P1, P2, WALL_Z, W, R, angle,
+                         check_box_hides_from_one, check_wall_both_see, on_wall, pixel)
 from scenes import camera, folder
-from scenes.reach import MIN_PARALLAX, Reach, angular_spacing, reach_map
+from scenes.reach import Reach, angular_spacing, reach_map
 
-W, H = 200, 150
-K = camera.intrinsics(W, H, 60)
-P1, P2 = np.array([-0.4, 0.0, 1.5]), np.array([0.4, 0.0, 1.5])
-R, ETA = 0.1, 1.5
-WALL_Z = 4.0
 WALL_X = (-2.0, 0.2)            # the wall's left and right edges; beyond x = 0.2, nothing
 WALL_Y = 1.6                    # half its height
-BOX_C, BOX_H = np.array([-0.4, -0.3, 2.2]), 0.1     # a cube's centre and half side
 
 
 def _affine(scale, t):
@@ -45,32 +41,6 @@ def tiny_desc() -> dict:
                        {"center": P2.tolist(), "radius": R, "ior": ETA}]}
 
 
-def _pixel(X):
-    return tuple(np.rint(camera.project(K, np.asarray(X, float)[None])[0]).astype(int))
-
-
-def _on_wall(u, v) -> np.ndarray:
-    """The point of the plane z = WALL_Z that pixel (u, v)'s centre sees."""
-    d = camera.pixel_rays(K, np.float64(u), np.float64(v))
-    return d * WALL_Z / d[2]
-
-
-def _angle(X) -> float:
-    """The angle at X between the two totems' centres."""
-    a, b = P1 - X, P2 - X
-    return float(np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))
-
-
-def _crosses_box(a, b) -> bool:
-    """Does the segment a-b pass through the box (slab test)?"""
-    d = b - a
-    with np.errstate(divide="ignore"):
-        t0 = (BOX_C - BOX_H - a) / d
-        t1 = (BOX_C + BOX_H - a) / d
-    lo, hi = np.minimum(t0, t1).max(), np.maximum(t0, t1).min()
-    return bool(lo <= hi and hi >= 0 and lo <= 1)
-
-
 def _past_wall(P, direction) -> bool:
     """Does the line from P along ``direction`` pass the wall's plane beside it?"""
     x, y, _ = P + direction * (WALL_Z - P[2]) / direction[2]
@@ -87,25 +57,11 @@ def traced():
 
 
 def test_a_wall_two_totems_see_is_in_reach_at_its_parallax(traced):
-    reach, _ = traced
-    u, v = _pixel([-0.3, 0.3, WALL_Z])
-    X = _on_wall(u, v)
-    assert not _crosses_box(P1, X) and not _crosses_box(P2, X)
-    assert reach.n_totems[v, u] == 2
-    assert reach.depth[v, u] == pytest.approx(WALL_Z, rel=1e-5)
-    assert reach.parallax[v, u] == pytest.approx(_angle(X) / reach.spacing.mean(), rel=1e-4)
-    assert reach.parallax[v, u] >= MIN_PARALLAX and reach.in_reach()[v, u]
+    check_wall_both_see(traced[0])
 
 
 def test_a_patch_a_box_hides_from_one_totem_is_out_of_reach(traced):
-    reach, _ = traced
-    # the box's shadow from the left totem, on the wall
-    X = P1 + (BOX_C - P1) * (WALL_Z - P1[2]) / (BOX_C[2] - P1[2])
-    assert _crosses_box(P1, X) and not _crosses_box(P2, X)
-    assert not _crosses_box(np.zeros(3), X)        # the camera sees the wall there
-    u, v = _pixel(X)
-    assert reach.depth[v, u] == pytest.approx(WALL_Z, rel=1e-5)
-    assert reach.n_totems[v, u] == 1 and not reach.in_reach()[v, u]
+    check_box_hides_from_one(traced[0])
 
 
 def test_a_backdrop_both_totems_see_along_its_direction_is_in_reach(traced):
@@ -113,14 +69,14 @@ def test_a_backdrop_both_totems_see_along_its_direction_is_in_reach(traced):
     X = np.array([1.6, 0.0, WALL_Z])              # beside the wall: nothing behind
     d = X / np.linalg.norm(X)
     assert _past_wall(np.zeros(3), d) and _past_wall(P1, d) and _past_wall(P2, d)
-    u, v = _pixel(X)
+    u, v = pixel(X)
     assert np.isinf(reach.depth[v, u]) and reach.backdrop[v, u]
     assert reach.n_totems[v, u] == 2 and reach.in_reach()[v, u]
 
 
 def test_the_totems_own_pixels_are_no_surface_to_judge(traced):
     reach, hits = traced
-    u, v = _pixel(P1)
+    u, v = pixel(P1)
     assert reach.excluded[v, u] and not reach.in_reach()[v, u]
     assert set(np.unique(hits.totem)) == {0, 1}
     assert np.all(hits.T[hits.sent_on()] > 0.05)
@@ -151,15 +107,15 @@ def test_reach_map_counts_each_totem_within_its_rays_footprint():
                   normal=normal, totem=totem)
     spacing = angular_spacing(d, totem, 2)
     np.testing.assert_allclose(r.spacing, spacing)
-    centre = _pixel([0.0, 0.0, WALL_Z])
-    angle = _angle(_on_wall(*centre))
+    centre = pixel([0.0, 0.0, WALL_Z])
+    theta = angle(on_wall(*centre))
     assert r.n_totems[centre[1], centre[0]] == 2
-    assert r.parallax[centre[1], centre[0]] == pytest.approx(angle / spacing.mean(), rel=1e-5)
+    assert r.parallax[centre[1], centre[0]] == pytest.approx(theta / spacing.mean(), rel=1e-5)
     # each fan covers x in P_x +- tan(0.3) * 2.5 m on the plane (plus its footprint)
     edge = np.tan(0.3) * (WALL_Z - P1[2])
-    only_right = _pixel([P1[0] + edge + 0.15, 0.0, WALL_Z])
+    only_right = pixel([P1[0] + edge + 0.15, 0.0, WALL_Z])
     assert r.n_totems[only_right[1], only_right[0]] == 1
-    corner = _pixel([0.0, -(edge + 0.15), WALL_Z])
+    corner = pixel([0.0, -(edge + 0.15), WALL_Z])
     assert r.n_totems[corner[1], corner[0]] == 0
 
 
@@ -231,3 +187,18 @@ def test_scene_make_writes_the_reach_and_scene_reach_writes_it_again(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "verify.cli", "scene", "reach",
                           str(tmp_path)], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_a_supersampled_pixel_sends_its_rays_through_its_subpixels():
+    from scenes.refraction import exit_rays
+
+    P = np.array([0.1, 0.05, 1.5])
+    u0, v0 = pixel(P + [0.03, 0.02, 0.0])           # a pixel inside the sphere's image
+    mask = np.zeros((1, H, W), bool)
+    mask[0, v0, u0] = True
+    one = exit_rays(K, mask, [P], 0.1, 1.5)
+    four = exit_rays(K, mask, [P], 0.1, 1.5, supersample=2)
+    assert len(one.u) == 1 and len(four.u) == 4
+    assert set(four.u) == {u0} and set(four.v) == {v0}
+    spread = np.linalg.norm(four.d - one.d, axis=1)
+    assert np.all(spread > 0) and np.allclose(four.d.mean(0), one.d[0], atol=0.1 * spread.max())

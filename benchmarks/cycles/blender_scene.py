@@ -12,8 +12,8 @@ import os
 import bpy
 import numpy as np
 
-__all__ = ["build", "render_png", "render_linear", "render_ids", "meter", "camera_params",
-           "set_visible"]
+__all__ = ["build", "render_png", "render_linear", "render_ids", "render_depth", "meter",
+           "camera_params", "set_visible"]
 
 TOTEM_INDEX = 100          # pass_index of totem j is TOTEM_INDEX + j; objects 1, 2, ...
 MARKER_INDEX = 200
@@ -335,19 +335,19 @@ def meter(path: str, pipeline: dict) -> float:
     return design.metered_ev(lin, pipeline["view_transform"])
 
 
-def render_ids(path: str) -> np.ndarray:
-    """Which object each pixel centre's camera ray meets first: (H, W) int16 of
-    ``pass_index`` (0 for none). One sample a pixel, a 0.01 px filter, every surface an
-    emitter of its index, the world dark."""
+def _probe(path: str, wire) -> np.ndarray:
+    """What each pixel centre's camera ray meets first, as every surface's emission
+    ``wire(nodes, links, combine)`` links into a Combine Color: (H, W, 3) float32, top
+    row first, 0 where the ray leaves the scene. One sample a pixel, a 0.01 px filter,
+    the world dark."""
     sc = bpy.context.scene
-    mat = bpy.data.materials.new("ids")
+    mat = bpy.data.materials.new("probe")
     mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.remove(nodes["Principled BSDF"])
     em = nodes.new("ShaderNodeEmission")
     comb = nodes.new("ShaderNodeCombineColor")
-    links.new(nodes.new("ShaderNodeObjectInfo").outputs["Object Index"],
-              comb.inputs["Red"])
+    wire(nodes, links, comb)
     links.new(comb.outputs["Color"], em.inputs["Color"])
     links.new(em.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
     layer = sc.view_layers[0]
@@ -355,12 +355,35 @@ def render_ids(path: str) -> np.ndarray:
     strength, bg.default_value = bg.default_value, 0.0
     layer.material_override = mat
     try:
-        lin = render_linear(path, {"samples": 1, "denoise": False, "filter": "BOX",
-                                   "filter_width": 0.01, "sampling_seed": 0})
+        return render_linear(path, {"samples": 1, "denoise": False, "filter": "BOX",
+                                    "filter_width": 0.01, "sampling_seed": 0})
     finally:
         layer.material_override = None
         bg.default_value = strength
-    return np.rint(lin[..., 0]).astype(np.int16)
+
+
+def render_ids(path: str) -> np.ndarray:
+    """Which object each pixel centre's camera ray meets first: (H, W) int16 of
+    ``pass_index`` (0 for none), :func:`_probe` of the Object Index."""
+    def wire(nodes, links, comb):
+        links.new(nodes.new("ShaderNodeObjectInfo").outputs["Object Index"],
+                  comb.inputs["Red"])
+
+    return np.rint(_probe(path, wire)[..., 0]).astype(np.int16)
+
+
+def render_depth(path: str) -> np.ndarray:
+    """Cycles' own depth of the first surface each pixel centre's camera ray meets, among
+    the objects rendered: (H, W) float32, metres along the camera's view axis (the
+    OpenCV camera frame's z), inf where the ray leaves the scene; :func:`_probe` of the
+    Camera Data node's View Z Depth (a check of ``blender_trace.py``)."""
+    def wire(nodes, links, comb):
+        links.new(nodes.new("ShaderNodeCameraData").outputs["View Z Depth"],
+                  comb.inputs["Red"])
+        comb.inputs["Green"].default_value = 1.0             # a surface was met
+
+    lin = _probe(path, wire)
+    return np.where(lin[..., 1] > 0.5, lin[..., 0], np.inf).astype(np.float32)
 
 
 def set_visible(obj, *, render=None, camera=None) -> None:

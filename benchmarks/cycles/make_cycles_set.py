@@ -19,8 +19,12 @@ renders each scene with Blender Cycles in ``.venv-cycles`` (``make cycles-env``;
                                   a render found there finished is not made again
                                   (unless the removal is asked and it was made without).
 
+and each scene folder's truth/reach.npz, the truth's reach (``truth_reach.py``: the
+camera's and the totems' rays traced by Blender in the scene; the edited copies get their
+source's), where a folder has none.
+
 Exit 2 with one line for bad arguments or a missing .venv-cycles; 1 when a render fails
-(its log is in ``_renders/s<seed>/render.log``).
+(its log is in ``_renders/s<seed>/render.log``) or the reach's trace fails.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.cycles import convert, design  # noqa: E402
+from benchmarks.cycles import convert, design, truth_reach  # noqa: E402
 from scenes.errors import BadInput  # noqa: E402
 from scenes.tamper import tamper  # noqa: E402
 
@@ -138,7 +142,14 @@ def main(argv=None) -> int:
                 print(f"{name}: no removable object in view")
         if (out / f"{name}-remove").exists():
             made.append(f"{name}-remove")
-        print(f"seed {seed}: {', '.join(made)} (render {secs:.0f} s)", flush=True)
+        t = time.perf_counter()
+        try:
+            truth_reach.write_reaches([out / m for m in made], missing=True, python=PY)
+        except RuntimeError as exc:
+            print(f"error: {name}: {exc}", file=sys.stderr)
+            return 1
+        print(f"seed {seed}: {', '.join(made)} (render {secs:.0f} s, reach "
+              f"{time.perf_counter() - t:.0f} s)", flush=True)
     return 0
 
 

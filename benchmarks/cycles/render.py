@@ -2,7 +2,7 @@
 
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --seed N
         [--kind room|yard|table] [--size WxH | --small] [--samples N] [--remove]
-        [--linear] [--no-clean] [--view AgX|Filmic|Standard] [--denoise on|off]
+        [--linear] [--depth] [--no-clean] [--view AgX|Filmic|Standard] [--denoise on|off]
         [--filter BOX|GAUSSIAN|BLACKMAN_HARRIS] [--filter-width PX]
         [--glass glass|refraction|coated] [--totem-shadows on|off]
     .venv-cycles/bin/python benchmarks/cycles/render.py OUT --desc DESC.json [...]
@@ -11,7 +11,10 @@ Writes OUT/: photo.png (the camera's photo: its view transform, denoiser and pix
 filter), clean.png (the same without the totems), ids.npy (the object each pixel centre
 sees first, ``blender_scene.render_ids``), removed.png with ``--remove`` (the photo
 without one object; ``convert.py`` keeps the totems' pixels), linear.npy with
-``--linear`` (the scene-linear photo), and render.json last (the description, Blender's
+``--linear`` (the scene-linear photo), depth.npy with ``--depth`` (Cycles' own depth of
+the first surface each pixel centre shows without the totems, camera-frame z in metres,
+inf for none: ``blender_scene.render_depth``, a check of ``blender_trace.py``), and
+render.json last (the description, Blender's
 camera as it held it, timings). The scene folder is written from it by ``convert.py``
 in the package's venv.
 """
@@ -40,6 +43,8 @@ def main(argv=None) -> int:
     ap.add_argument("--remove", action="store_true",
                     help="also render without one object (for the camera's view)")
     ap.add_argument("--linear", action="store_true", help="also the scene-linear photo")
+    ap.add_argument("--depth", action="store_true",
+                    help="also Cycles' depth of the scene without the totems (checks)")
     ap.add_argument("--no-clean", action="store_true",
                     help="no clean.png (an ablation of the totems alone, whose clean "
                          "view is the unablated render's)")
@@ -91,6 +96,10 @@ def main(argv=None) -> int:
         bs.set_visible(t, render=False)
     if not a.no_clean:
         timed("clean_s", bs.render_png, os.path.join(out, "clean.png"), p)
+    if a.depth:
+        depth = timed("depth_s", bs.render_depth, os.path.join(out, "depth.exr"))
+        np.save(os.path.join(out, "depth.npy"), depth)
+        os.remove(os.path.join(out, "depth.exr"))
     import bpy
 
     record = {"format": 1, "description": desc, "camera": bs.camera_params(),

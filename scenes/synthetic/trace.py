@@ -14,7 +14,6 @@ the same rays).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,12 +21,11 @@ import numpy as np
 
 from scenes import backend, camera, folder
 from scenes.errors import BadInput
-from scenes.reach import COS_EVIDENCE, Reach, angular_spacing, reach_map
-from scenes.refraction import (MIN_TRANSMITTANCE, entry_cosine, refract_sphere,
-                               transmittance)
+from scenes.reach import COS_EVIDENCE, SUPERSAMPLE, Reach, reach_map
+from scenes.refraction import MIN_TRANSMITTANCE, exit_rays
 from scenes.synthetic.render import NOTHING, TOTEM_ID_BASE, load_scene, scene_dict, totem_id
 
-__all__ = ["SUPERSAMPLE", "TotemHits", "tracer", "camera_points", "totem_hits", "truth_reach", "write_reach"]
+__all__ = ["TotemHits", "tracer", "camera_points", "totem_hits", "truth_reach", "write_reach"]
 
 
 @dataclass
@@ -36,11 +34,8 @@ class TotemHits:
 
     Attributes
     ----------
-    u, v : (m,) int, the pixel (column, row).
-    totem : (m,) int, the sphere, as ``desc["totems"]`` orders them.
-    o, d : (m, 3) exit point on the sphere (metres) and unit direction into the scene.
-    T : (m,) Fresnel transmittance through both surfaces.
-    cos_in : (m,) incidence cosine where the camera ray entered.
+    u, v, totem, o, d, T, cos_in : as :class:`scenes.refraction.ExitRays` (the sphere
+        ``totem`` as ``desc["totems"]`` orders them).
     Y : (m, 3) where the ray lands, metres; NaN where it leaves the scene.
     normal : (m, 3) the surface's unit normal there; NaN where it left.
     hit_id : (m,) int, the object or light it lands on (:data:`NOTHING` for the
@@ -111,56 +106,33 @@ def camera_points(desc: dict, trace):
 
 def totem_hits(desc: dict, ids: np.ndarray, trace, *, supersample: int = 1) -> TotemHits:
     """Every pixel of each totem's true image (``ids``, from :func:`camera_points`),
-    refracted through its sphere and traced on into the scene by ``trace``; with
-    ``supersample`` s, s x s rays a pixel, at the centres of its s x s sub-pixels (``u``,
-    ``v`` then the pixel each came from)."""
-    K = np.asarray(desc["K"], np.float64)
-    s = int(supersample)
-    sub_px = (np.arange(s) + 0.5) / s - 0.5
-    du, dv = (x.ravel() for x in np.meshgrid(sub_px, sub_px))
-    parts = []
-    for j, t in enumerate(desc["totems"]):
-        v, u = np.nonzero(ids == totem_id(j))
-        if u.size == 0:
-            continue
-        u, v = np.repeat(u, s * s), np.repeat(v, s * s)
-        dc = camera.pixel_rays(K, u + np.tile(du, len(u) // (s * s)),
-                               v + np.tile(dv, len(v) // (s * s)))
-        P, R, eta = np.asarray(t["center"], np.float64), float(t["radius"]), float(t["ior"])
-        E, d_out, valid = refract_sphere(dc, P, R, eta)
-        cos_in = entry_cosine(dc, P, R)
-        parts.append((u[valid], v[valid], np.full(valid.sum(), j), E[valid], d_out[valid],
-                      transmittance(cos_in[valid], eta), cos_in[valid]))
-    if not parts:
-        e1, e3 = np.zeros(0), np.zeros((0, 3))
-        return TotemHits(e1.astype(int), e1.astype(int), e1.astype(int), e3, e3, e1, e1,
-                         e3, e3, e1.astype(int))
-    u, v, jt, o, d, T, cos_in = (np.concatenate(x) for x in zip(*parts))
-    Y, N, hit_id = trace(o + 1e-5 * d, d)
-    return TotemHits(u, v, jt, o, d, T, cos_in, Y, N, hit_id)
-
-
-SUPERSAMPLE = 4
-"""Rays a totem pixel sends, a side: 4 x 4 finds the reach as 8 x 8 does to 2-3 % of the
-pixels (one ray a pixel: 7 %; docs/decisions/scenes-synthetic.md)."""
+    refracted through its sphere (:func:`scenes.refraction.exit_rays`, ``supersample``
+    x itself rays a pixel) and traced on into the scene by ``trace``."""
+    t = desc["totems"]
+    r = exit_rays(np.asarray(desc["K"], np.float64),
+                  [ids == totem_id(j) for j in range(len(t))],
+                  [x["center"] for x in t], [x["radius"] for x in t], [x["ior"] for x in t],
+                  supersample=supersample)
+    if len(r.u) == 0:
+        return TotemHits(*r, Y=r.o.copy(), normal=r.o.copy(), hit_id=r.u.copy())
+    Y, N, hit_id = trace(r.o + 1e-5 * r.d, r.d)
+    return TotemHits(*r, Y=Y, normal=N, hit_id=hit_id)
 
 
 def truth_reach(desc: dict, *, cos_min: float = COS_EVIDENCE,
                 supersample: int = SUPERSAMPLE) -> tuple[Reach, TotemHits]:
     """The truth's reach of a described scene (:class:`scenes.reach.Reach`) from the totem
     rays that entered their sphere at an incidence cosine of at least ``cos_min`` (by
-    default the rays the evidence map reads), and every totem ray traced (``supersample``
-    as :func:`totem_hits`)."""
+    default the rays the evidence map reads), ``supersample`` x itself a totem pixel,
+    and every totem ray traced."""
     trace = tracer(desc)
     view, X, ids = camera_points(desc, trace)
     hits = totem_hits(desc, ids, trace, supersample=supersample)
     go = hits.sent_on() & (hits.cos_in >= cos_min)
     centers = np.array([t["center"] for t in desc["totems"]], np.float64)
-    # the parallax's unit is the spacing of one ray a pixel: s times that of s x s
-    spacing = angular_spacing(hits.d[go], hits.totem[go], len(centers)) * int(supersample)
     reach = reach_map(view, X, ids <= -TOTEM_ID_BASE, centers, o=hits.o[go], d=hits.d[go],
                       Y=hits.Y[go], normal=hits.normal[go], totem=hits.totem[go],
-                      spacing=spacing)
+                      supersample=supersample)
     return reach, hits
 
 
@@ -170,17 +142,12 @@ def write_reach(scene_dir) -> Path:
     folders made before ``scene make`` wrote it. A tampered copy holds its source's
     description, so it gets the source's reach: what its totems show."""
     scene_dir = Path(scene_dir)
-    path = scene_dir / "truth" / "scene.json"
-    if not path.is_file():
-        raise BadInput(f"no truth/scene.json in {scene_dir}: the truth's reach is traced "
-                       "in a synthetic scene made by `totems scene make`")
-    try:
-        desc = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise BadInput(f"{path} is not valid JSON ({exc})") from None
+    desc = folder.read_scene_json(scene_dir, missing="the truth's reach is traced in a "
+                                  "synthetic scene made by `totems scene make`")
     if "objects" not in desc or "totems" not in desc:
-        raise BadInput(f"{path} is not a Mitsuba scene description (a Cycles scene's "
-                       "reach is traced by benchmarks/cycles)")
+        raise BadInput(f"{scene_dir / 'truth' / 'scene.json'} is not a Mitsuba scene "
+                       "description (a Cycles scene's "
+                       "reach is traced by Blender: benchmarks/cycles/truth_reach.py)")
     reach, _ = truth_reach(desc)
     pose = folder.safe_load_npy(scene_dir / "truth" / "totem_pose.npy")
     centers = np.array([t["center"] for t in desc["totems"]], np.float64)
