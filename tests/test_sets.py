@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from scenes.synthetic.presets import PRESETS
+from scenes.tamper.tamper import KINDS
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "make_set.py"
 _spec = importlib.util.spec_from_file_location("make_set", _PATH)
@@ -41,7 +42,8 @@ def test_calibration_has_100_untouched_photos_over_every_preset_and_channel():
 
 def test_benchmark_has_20_photos_per_kind_pristine_and_at_jpeg75():
     photos = sets.photos("benchmark")
-    for kind in sets.SCENE_KINDS:
+    assert set(sets.SCENE_KINDS + sets.TOTEM_EDITS) == set(KINDS) - {"rekey"}
+    for kind in sets.SCENE_KINDS + sets.TOTEM_EDITS:
         for channel in ("pristine", "jpeg75"):
             n = sum(p.kind == kind and p.channel == channel for p in photos)
             assert n >= 20, (kind, channel, n)
