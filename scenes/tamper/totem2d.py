@@ -209,7 +209,8 @@ def erase_in_totems(src: Source, edit: Edit, footprint: np.ndarray, *,
     into every totem: the object's refracted ``footprint`` ((H, W) bool, from
     :func:`object_footprints`), grown by ``grow_px``, filled in each totem from that
     totem's own pixels (:func:`scenes.tamper.edits2d.clone_fill`, everything outside
-    the totem avoided; in practice its inpainting, as no sideways clone fits a disc)."""
+    the totem avoided: a sideways clone of the totem's texture where one fits inside the
+    disc, its seam blended into an inpainting of the totem's pixels)."""
     image = edit.image
     H, W = src.shape
     totem_mask = np.zeros((H, W), bool)
