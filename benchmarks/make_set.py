@@ -9,8 +9,8 @@
 Layout: OUT/<preset>-<seed>/ (untouched), OUT/<preset>-<seed>-<kind>/ (manipulated),
 OUT/<name>+<channel>/ (recaptured through ``scenes.channel.recapture``),
 OUT/<preset>-<seed>-<n>totems/ (the totems study). Without ``--set``, the standard set: box
-and envmap seeds 1-5 (``--seeds``, ``--first-seed``), untouched and every manipulation,
-pristine.
+and envmap seeds 1-5 (``--seeds``, ``--first-seed``), untouched and every manipulation
+of ``sets.SCENE_KINDS`` (``--kinds`` for the others), pristine.
 --small: 320x240 and the first 2 seeds of each preset, for a quick run.
 --totems-study: also box scenes with 2 and 6 totems (the supplementary's study).
 --presets, --kinds, --channels keep only those (``--kinds ""``: untouched photos only).
@@ -48,12 +48,14 @@ from scenes.tamper.tamper import KINDS, tamper
 # window 86, tabletop 33), divided by 1.83, the factor that brings the standard set's
 # tasks so timed to the 13 min its build took alone (README, 2026-12). At 320x240 a
 # make takes about a third. A re-rendering edit takes RENDER_FACTOR times its preset's
-# make (measured on the same scenes: remove 0.85-1.0, insert 0.8-1.1, shift 1.2-2.0).
+# make (measured on the same scenes: remove 0.85-1.0, insert 0.8-1.1, shift 1.2-2.0;
+# rekey 2.6 times remove on box 1 with a key error, four renders; 1.1 without, two).
 SECONDS = {"make": {"box": 28.0, "envmap": 10.2, "outdoor": 10.6, "window": 47.0,
                     "tabletop": 18.3},
-           "tamper": {"color": 0.2, "splice": 0.5, "inpaint": 0.5},
+           "tamper": {"color": 0.2, "splice": 0.5, "inpaint": 0.5, "totem-retouch": 0.2,
+                      "consistent-paste": 0.5, "erase-everywhere": 1.0},
            "recapture": 0.2}
-RENDER_FACTOR = {"remove": 0.93, "insert": 0.97, "shift": 1.5}
+RENDER_FACTOR = {"remove": 0.93, "insert": 0.97, "shift": 1.5, "rekey": 2.4}
 PARALLEL_GAIN = 1.2          # 2 jobs on 2 cores against 1: renders already use both
 
 
@@ -304,7 +306,7 @@ def _photos(parser, args) -> list:
     n_seeds = args.seeds or (2 if args.small else 5)
     return standard_photos(presets or ["box", "envmap"],
                            range(first, first + n_seeds),
-                           KINDS if kinds is None else kinds, args.totems_study)
+                           sets.SCENE_KINDS if kinds is None else kinds, args.totems_study)
 
 
 if __name__ == "__main__":

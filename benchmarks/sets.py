@@ -7,9 +7,9 @@
 ``benchmark``     for the README's figures only: untouched photos pristine, at JPEG 75 and
                   in one other channel each (turning through them, so every preset meets
                   every channel: about two hours of fits here, not the seven of every
-                  channel for every photo), every manipulation pristine and at JPEG 75,
-                  the totems study (box and envmap seeds 1-5 are the standard set of the
-                  figures so far).
+                  channel for every photo), every manipulation (but ``rekey``)
+                  pristine and at JPEG 75, the totems study (box and envmap seeds 1-5
+                  are the standard set of the figures so far).
 
 So that no figure is reported on what it was tuned on, a preset's seed belongs to one
 set at most (``RESERVED`` seeds to none): :func:`check_disjoint` refuses an overlap and
@@ -28,12 +28,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from scenes.synthetic.presets import PRESETS
-from scenes.tamper.tamper import KINDS
+from scenes.tamper.tamper import KINDS, TOTEM_KINDS
 
 __all__ = ["CHANNELS", "SEEDS", "CYCLES", "CYCLES_CHANNELS", "RESERVED", "Recipe", "RECIPES",
-           "Photo", "SETS", "check_disjoint", "photos"]
+           "Photo", "SETS", "SCENE_KINDS", "TOTEM_EDITS", "check_disjoint", "photos"]
 
 UNTOUCHED = "none"
+SCENE_KINDS = tuple(k for k in KINDS if k not in TOTEM_KINDS)
+"""The manipulations before issue 61's forgers of the totems (the standard set's)."""
+TOTEM_EDITS = ("totem-retouch", "consistent-paste", "erase-everywhere")
+"""The forgeries that edit the totems too, made of each seed with its own seed. ``rekey``
+is not among them: its key error is a setting to sweep (issue 61, the key's strength),
+not a photo per seed."""
 
 # name -> scenes.channel.channel.Channel fields (the camera's and the messenger's steps)
 CHANNELS = {
@@ -73,7 +79,8 @@ RESERVED = {"validation of the thresholds (README, 2026-12)":
 class Recipe:
     """Which photos a set makes of each of its seeds.
 
-    kinds : "none" (the untouched photo) and manipulations (``scenes.tamper.tamper.KINDS``).
+    kinds : "none" (the untouched photo) and manipulations (``scenes.tamper.tamper.KINDS``;
+        made with the kind's defaults and the photo's seed).
     channels : each photo in every one of these, or, with ``rotate`` = k, in
         k of them, turning through the list from seed to seed (so every channel meets
         every preset without every photo in every channel).
@@ -95,7 +102,7 @@ RESTING = ("box", "outdoor", "window")
 always rest; envmap's floor is box's)."""
 
 RECIPES = {
-    "development": (Recipe(kinds=(UNTOUCHED,) + KINDS),
+    "development": (Recipe(kinds=(UNTOUCHED,) + SCENE_KINDS + TOTEM_EDITS),
                     Recipe(channels=("jpeg75", "noise2", "resize480")),
                     Recipe(kinds=(UNTOUCHED, "color", "splice"), presets=RESTING,
                            placement="resting")),
@@ -106,7 +113,8 @@ RECIPES = {
                            placement="resting")),
     "benchmark": (Recipe(channels=("pristine", "jpeg75")),
                   Recipe(channels=tuple(c for c in RECAPTURED if c != "jpeg75"), rotate=1),
-                  Recipe(kinds=KINDS, channels=("pristine", "jpeg75")),
+                  Recipe(kinds=SCENE_KINDS, channels=("pristine", "jpeg75")),
+                  Recipe(kinds=TOTEM_EDITS, channels=("pristine", "jpeg75")),
                   Recipe(presets=("box",), seeds=range(1, 3), n_totems=2),
                   Recipe(presets=("box",), seeds=range(1, 3), n_totems=6),
                   Recipe(kinds=(UNTOUCHED, "color", "splice"), channels=("pristine", "jpeg75"),

@@ -1,4 +1,5 @@
-"""Draw docs/tamper_strip.png: one forgery of each kind on a 640x480 box scene.
+"""Draw docs/tamper_strip.png: one forgery of each kind that edits the camera view (the
+six before issue 61's forgers of the totems, ``TOTEM_KINDS``) on a 640x480 box scene.
 
     python docs/tamper_strip.py WORKDIR [--seed 1] [--spp 64]
 
@@ -13,7 +14,7 @@ from PIL import Image, ImageDraw
 
 from scenes import folder
 from scenes.synthetic.make import make_scene
-from scenes.tamper.tamper import KINDS, tamper
+from scenes.tamper.tamper import KINDS, TOTEM_KINDS, tamper
 
 TILE = (200, 150)
 
@@ -30,7 +31,7 @@ def main():
     if not scene.exists():
         make_scene(scene, preset="box", seed=a.seed, size=(640, 480), spp=a.spp)
     tiles = [("original", scene, None)]
-    for k in KINDS:
+    for k in (k for k in KINDS if k not in TOTEM_KINDS):
         if not (work / k).exists():
             tamper(scene, work / k, kind=k, seed=0)
         tiles.append((k, work / k, folder.read_mask(work / k / "manip_mask.png")))

@@ -1,4 +1,5 @@
-"""Selections of the image: (H, W) bool masks, their bounding box, growth and shift.
+"""Selections of the image: (H, W) bool masks, their bounding box, growth, shift and
+outline.
 
 The one place where a mask's bounding box, or its growth by a radius, is computed (the
 forger's tools, the fit's crop of the totems and the protected region all use it).
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
-__all__ = ["bbox", "dilate", "shift_mask"]
+__all__ = ["bbox", "dilate", "outline", "shift_mask"]
 
 
 def bbox(mask) -> tuple[int, int, int, int]:
@@ -45,3 +46,23 @@ def shift_mask(mask, dx: int, dy: int):
     ok = (ys >= 0) & (ys < H) & (xs >= 0) & (xs < W)
     out[ys[ok], xs[ok]] = True
     return out
+
+
+def outline(mask) -> np.ndarray:
+    """The sub-pixel outline of a mask's largest blob (holes filled), (m, 2) pixel
+    coordinates (u, v): where it crosses the segments between white and black pixel
+    centres (the 0.5 iso-contour, marching squares), the closing point not repeated.
+
+    Raises ValueError for a mask with no True pixel.
+    """
+    from skimage import measure
+
+    m = ndi.binary_fill_holes(np.asarray(mask, bool))
+    lab, n = ndi.label(m)
+    if n == 0:
+        raise ValueError("the outline of an empty mask")
+    m = lab == 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
+    rc = max(measure.find_contours(np.pad(m, 1).astype(np.float32), 0.5), key=len)
+    if np.allclose(rc[0], rc[-1]):
+        rc = rc[:-1]
+    return rc[:, ::-1] - 1.0

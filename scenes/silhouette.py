@@ -2,10 +2,12 @@
 
 The outline of a spherical totem is the image of the cone of rays tangent to it: with
 the camera's K, three parameters (:func:`cone_points`); without it, an ellipse
-(:func:`ellipse_points`). The image is read along either by its step across the contour
-(:func:`edge_at`, from :func:`gradients`) and by how well its gradient lines up with
-the contour's normal (:func:`orientation_at`, from :func:`orientation_field`). Pixel
-coordinates are OpenCV's (pixel centres at integers), (x, y) = (column, row).
+(:func:`ellipse_points`). The cone fitted to an outline's points
+(:func:`cone_from_outline`) and a radius give the sphere (:func:`sphere_from_circle`).
+The image is read along either by its step across the contour (:func:`edge_at`, from
+:func:`gradients`) and by how well its gradient lines up with the contour's normal
+(:func:`orientation_at`, from :func:`orientation_field`). Pixel coordinates are
+OpenCV's (pixel centres at integers), (x, y) = (column, row).
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import numpy as np
 
 __all__ = ["orientation_field", "gradients", "ellipse_points", "remap", "edge_at",
            "orientation_at", "edge_along", "orientation_along", "cone_points",
-           "cones_points", "cone_fit_q", "cone_ellipse",
+           "cones_points", "cone_fit_q", "cone_ellipse", "cone_from_outline",
+           "sphere_from_circle",
            "ellipse_mask", "MIN_AXIS_RATIO", "GRID_SHIFTS", "GRID_SIZES", "fit_cone",
            "fit_ellipse", "sphere_like", "support", "busyness", "alignment", "arc_support"]
 
@@ -204,6 +207,49 @@ def cone_ellipse(q, K):
 
     (ex, ey), (A, B), ang = cv2.fitEllipse(cone_points(q, K, 90)[0].astype(np.float32))
     return (float(ex), float(ey), A / 2.0, B / 2.0, np.radians(ang))
+
+
+def cone_from_outline(uv, K) -> np.ndarray:
+    """The tangent cone q = (u0, v0, s) whose image passes nearest the outline points
+    ``uv`` (m, 2) pixels (e.g. :func:`scenes.masks.outline` of a totem's mask), ``K``
+    (3, 3) OpenCV intrinsics.
+
+    Least squares on the angle between each point's ray and the cone: ``angle(d_k, a) -
+    arctan(s / fx)``, ``a`` the ray through pixel (u0, v0), started from the points'
+    mean and mean distance to it. The cone is the sphere's whatever its radius
+    (:func:`sphere_from_circle` gives the centre for a radius).
+
+    Returns (3,) float64: u0, v0, s in pixels.
+    """
+    from scipy.optimize import least_squares
+
+    from scenes.camera import pixel_rays
+
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    K = np.asarray(K, np.float64)
+    d = pixel_rays(K, uv[:, 0], uv[:, 1])
+    c = uv.mean(0)
+    q0 = np.array([c[0], c[1], np.linalg.norm(uv - c, axis=1).mean()])
+
+    def residual(q):
+        axis = pixel_rays(K, q[0], q[1])
+        return np.arccos(np.clip(d @ axis, -1.0, 1.0)) - np.arctan(abs(q[2]) / K[0, 0])
+
+    q = least_squares(residual, q0, method="lm", xtol=1e-12, ftol=1e-12).x
+    return np.array([q[0], q[1], abs(q[2])])
+
+
+def sphere_from_circle(u0: float, v0: float, s: float, K, R: float) -> np.ndarray:
+    """The centre (3,) metres, camera frame, of the sphere of radius ``R`` (metres) whose
+    tangent cone has its axis through pixel (``u0``, ``v0``) and half-angle
+    ``arctan(s / fx)`` (``s`` pixels, as :func:`cone_points`): ``|P| = R / sin(alpha)``.
+    A sphere ``k`` times as large ``k`` times as far has the same outline."""
+    from scenes.camera import pixel_rays
+
+    K = np.asarray(K, np.float64)
+    axis = pixel_rays(K, np.float64(u0), np.float64(v0))
+    alpha = np.arctan(abs(float(s)) / K[0, 0])
+    return axis * (R / np.sin(alpha))
 
 
 def fit_ellipse(field, cand, shape, polish=None):

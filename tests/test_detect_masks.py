@@ -223,8 +223,7 @@ def test_refraction_through_the_sphere_matches_inverse_sphere():
     # scenes/refraction.py's numpy optics against inverse.sphere (Dr.Jit, Mitsuba's Snell
     # and Fresnel code): the same exit points and directions for rays across the sphere.
     from inverse import sphere
-    from scenes import backend, camera
-    from scenes.photo import glass
+    from scenes import backend, camera, silhouette
     from scenes.refraction import entry_cosine, refract_sphere, transmittance
     backend.use()
     mi = backend.modules()[1]
@@ -245,7 +244,7 @@ def test_refraction_through_the_sphere_matches_inverse_sphere():
     T = transmittance(entry_cosine(d, P, R), eta)        # Fresnel, against mi.fresnel's
     assert np.allclose(T[ok], np.array(T2)[ok], atol=1e-5) and T.min() < 0.9 < T.max()
     # and the sphere the circle implies is the one it was drawn from
-    assert np.allclose(glass.sphere_from_circle(uv[0], uv[1], s, K, R), P, atol=1e-9)
+    assert np.allclose(silhouette.sphere_from_circle(uv[0], uv[1], s, K, R), P, atol=1e-9)
 
 
 @pytest.fixture(scope="module")
@@ -369,3 +368,20 @@ def test_arc_support_lets_one_arc_go():
     assert silhouette.support(ell, field) < 0.05 < silhouette.arc_support(ell, field)
     flat = np.random.default_rng(1).normal(0.5, 0.05, img.shape).astype(np.float32)
     assert silhouette.arc_support(ell, silhouette.orientation_field(flat, 1.0)) < 0.05
+
+
+def test_a_mask_outline_gives_the_sphere_for_a_radius():
+    # scenes.silhouette.cone_from_outline on a sphere's exact silhouette (pixel centres
+    # inside its image), then sphere_from_circle with its radius: the sphere's centre,
+    # and twice the radius twice as far along the same line.
+    from scenes import camera, masks, silhouette
+    K = camera.intrinsics(160, 120, 60)
+    for P, R in ((np.array([0.3, 0.2, 1.5]), 0.1), (np.array([-0.5, -0.1, 2.2]), 0.12)):
+        m = camera.sphere_silhouette(P, R, K, (120, 160))
+        uv = masks.outline(m)
+        assert len(uv) > 30 and not np.allclose(uv[0], uv[-1])
+        q = silhouette.cone_from_outline(uv, K)
+        got = silhouette.sphere_from_circle(*q, K, R)
+        assert np.linalg.norm(got - P) < 0.01 * np.linalg.norm(P), (got, P)   # 7-11 px discs
+        twice = silhouette.sphere_from_circle(*q, K, 2 * R)
+        assert np.allclose(twice, 2 * got)

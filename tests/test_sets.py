@@ -42,7 +42,8 @@ def test_calibration_has_100_untouched_photos_over_every_preset_and_channel():
 
 def test_benchmark_has_20_photos_per_kind_pristine_and_at_jpeg75():
     photos = sets.photos("benchmark")
-    for kind in KINDS:
+    assert set(sets.SCENE_KINDS + sets.TOTEM_EDITS) == set(KINDS) - {"rekey"}
+    for kind in sets.SCENE_KINDS + sets.TOTEM_EDITS:
         for channel in ("pristine", "jpeg75"):
             n = sum(p.kind == kind and p.channel == channel for p in photos)
             assert n >= 20, (kind, channel, n)
@@ -51,7 +52,7 @@ def test_benchmark_has_20_photos_per_kind_pristine_and_at_jpeg75():
     # the standard set (box and envmap seeds 1-5, every kind, pristine) is part of it
     names = {p.name for p in photos}
     assert {f"{pr}-{s}-{k}" for pr in ("box", "envmap") for s in range(1, 6)
-            for k in KINDS} <= names
+            for k in sets.SCENE_KINDS} <= names
 
 
 def test_names_and_stages(tmp_path):
@@ -69,7 +70,8 @@ def test_names_and_stages(tmp_path):
 
 
 def test_standard_set_and_options_as_before(capsys, tmp_path):
-    photos = make_set.standard_photos(["box", "envmap"], range(1, 6), KINDS, False)
+    photos = make_set.standard_photos(["box", "envmap"], range(1, 6), sets.SCENE_KINDS,
+                                      False)
     assert len(photos) == 70 and {p.channel for p in photos} == {"pristine"}
     assert make_set.main([str(tmp_path), "--first-seed", "11", "--seeds", "8",
                           "--kinds", "", "--dry-run"]) == 0

@@ -272,7 +272,8 @@ def test_unknown_kind_and_existing_output(photo, tmp_path):
         tamper(photo, tmp_path / "full", kind="color")
     with pytest.raises(BadInput):
         tamper(photo, photo, kind="color")
-    assert set(KINDS) == {"color", "splice", "inpaint", "shift", "remove", "insert"}
+    assert set(KINDS) == {"color", "splice", "inpaint", "shift", "remove", "insert",
+                          "totem-retouch", "consistent-paste", "erase-everywhere", "rekey"}
 
 
 def test_interrupted_run_leaves_nothing_that_looks_finished(photo, tmp_path, monkeypatch):

@@ -4,10 +4,10 @@ A totem refracts the camera's rays twice and sends them back into the scene the 
 sees: inside its outline the photo holds a small, inverted copy of the rest of the
 photo. Given a candidate circle, the camera's ``K`` and the key (radius ``R`` in metres,
 index of refraction ``eta``), the sphere's centre follows from the circle (the cone of
-rays tangent to it, as :mod:`inverse.pose.pose`), each pixel inside it is traced through the
-sphere (Snell at both surfaces), and the colour the photo shows where the refracted ray
-lands is correlated with the colour inside the circle (:func:`glass_scores`). An opaque
-ball or a ring of texture shows something else.
+rays tangent to it, :func:`scenes.silhouette.sphere_from_circle`), each pixel inside it
+is traced through the sphere (Snell at both surfaces), and the colour the photo shows
+where the refracted ray lands is correlated with the colour inside the circle
+(:func:`glass_scores`). An opaque ball or a ring of texture shows something else.
 
 Frames and units: the OpenCV camera frame (+x right, +y down, +z forward), metres;
 pixels (u, v) with pixel centres at integers. Colours are the photo's sRGB in [0, 1].
@@ -21,7 +21,7 @@ import numpy as np
 from scenes import camera
 from scenes.refraction import refract_sphere
 
-__all__ = ["sphere_from_circle", "RHO_MAX", "DEPTHS", "SIGMA_PX",
+__all__ = ["RHO_MAX", "DEPTHS", "SIGMA_PX",
            "SIGMA_INSIDE_PX", "disc_pattern", "glass_scores", "outline_scores"]
 
 RHO_MAX = 0.85
@@ -38,17 +38,6 @@ of the scene several photo pixels wide."""
 
 SIGMA_INSIDE_PX = 1.0
 """Blur (pixels) of the photo inside the circle, read at about 250 points."""
-
-
-def sphere_from_circle(u0: float, v0: float, s: float, K, R: float) -> np.ndarray:
-    """The centre (3,) metres, camera frame, of the sphere of radius ``R`` (metres) whose
-    tangent cone has its axis through pixel (``u0``, ``v0``) and half-angle
-    ``arctan(s / fx)`` (``s`` pixels, as :func:`scenes.silhouette.cone_points`):
-    ``|P| = R / sin(alpha)``."""
-    K = np.asarray(K, np.float64)
-    axis = camera.pixel_rays(K, np.float64(u0), np.float64(v0))
-    alpha = np.arctan(abs(float(s)) / K[0, 0])
-    return axis * (R / np.sin(alpha))
 
 
 def disc_pattern(n_points: int = 256) -> np.ndarray:
@@ -71,7 +60,8 @@ def glass_scores(inside, around, circles, K, etas, *, pattern=None) -> np.ndarra
     around : (H, W, 3) float32 sRGB, the photo blurred by :data:`SIGMA_PX` (read where
         the refracted rays land).
     circles : (m, 3) pixels, each circle's centre (u0, v0) and radius s, taken as the
-        image of the sphere's tangent cone (:func:`sphere_from_circle`).
+        image of the sphere's tangent cone
+        (:func:`scenes.silhouette.sphere_from_circle`).
     K : (3, 3) OpenCV intrinsics.
     etas : the key's indices of refraction (one or several; the radius does not matter:
         a sphere R times as large seen R times as far shows the same picture).

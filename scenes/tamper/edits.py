@@ -1,9 +1,12 @@
 """What the forgers share: an edit, the scene it is made on, where it goes.
 
-The editors of :mod:`scenes.tamper.tamper` (2D: ``color``, ``splice``, ``inpaint``) and of
-:mod:`scenes.tamper.tamper3d` (re-rendering: ``remove``, ``insert``, ``shift``) are
-functions ``(Source, rng) -> Edit``. Both modules import this one and neither imports the
-other at load time (``tamper`` loads ``tamper3d`` only when a 3D kind is asked for).
+The editors of :mod:`scenes.tamper.tamper` (2D: ``color``, ``splice``, ``inpaint``,
+``consistent-paste``, ``erase-everywhere``), of :mod:`scenes.tamper.tamper3d` (re-rendering:
+``remove``, ``insert``, ``shift``), of :mod:`scenes.tamper.totem2d` (``totem-retouch``,
+and the totem halves of ``consistent-paste`` and ``erase-everywhere``) and of
+:mod:`scenes.tamper.rekey` (``rekey``) are functions ``(Source, rng) -> Edit``. They
+import this one; ``tamper`` loads the others only when their kind is asked for, and none
+of them imports ``tamper``.
 
 The pixel tools themselves (pasting, cloning, moving) are in
 :mod:`scenes.tamper.edits2d`; a selection's box or its dilation in :mod:`scenes.masks`.
@@ -29,7 +32,8 @@ class Edit:
     image: np.ndarray                       # (H, W, 3) uint8 sRGB
     mask: np.ndarray                        # (H, W) bool, changed camera-view pixels
     record: dict = field(default_factory=dict)
-    totem_mask: np.ndarray | None = None    # (H, W) bool, edited totem pixels (shift)
+    totem_mask: np.ndarray | None = None    # (H, W) bool, edited totem pixels (the
+                                            # kinds that edit the totems: shift, ...)
 
 
 @dataclass
@@ -42,6 +46,8 @@ class Source:
     truth: folder.Truth | None
     totems: np.ndarray          # (H, W) bool, union of the totem masks
     region: np.ndarray | None   # (H, W) bool, where the user asked for the edit
+    options: dict = field(default_factory=dict)   # the kind's own options, as given
+                                                  # (None or absent: drawn per seed)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -65,12 +71,13 @@ def target_zone(totems: np.ndarray) -> np.ndarray:
     return zone & ~totems
 
 
-def pick_object(src: Source, rng, *, ids=None):
+def pick_object(src: Source, rng, *, ids=None, only=None):
     """A removable object of the scene visible in the camera view (not through a
     totem), preferring the region, else one seen above the totems.
 
     ``ids`` is ``render.shape_ids(desc, totems=True)`` if the caller has it already
-    (it is rendered otherwise). Needs ``src.truth``.
+    (it is rendered otherwise); ``only``, if given, the object ids to choose among.
+    Needs ``src.truth``.
 
     Returns (object dict, (H, W) bool of its directly seen pixels).
     """
@@ -83,7 +90,7 @@ def pick_object(src: Source, rng, *, ids=None):
     H, W = src.shape
     cands, weights = [], []
     for obj in desc["objects"]:
-        if not obj.get("removable"):
+        if not obj.get("removable") or (only is not None and obj["id"] not in only):
             continue
         seen = ids == obj["id"]
         n_seen, n_want = int(seen.sum()), int((seen & want).sum())
@@ -91,7 +98,9 @@ def pick_object(src: Source, rng, *, ids=None):
             cands.append(obj)
             weights.append(n_want)
     if not cands:
-        raise BadInput("no removable object of the scene is visible "
+        raise BadInput("no removable object of the scene "
+                       + ("that a totem sees " if only is not None else "")
+                       + "is visible "
                        + ("in the region" if src.region is not None else
                           "above the totems") + "; try another scene or region")
     if src.region is not None:

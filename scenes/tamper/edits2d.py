@@ -23,9 +23,9 @@ from scipy import ndimage as ndi
 
 from scenes.masks import bbox, shift_mask
 
-__all__ = ["INPAINT_METHODS", "astronaut_cutout", "clone_fill", "composite",
-           "feathered_alpha", "inpaint", "move_pixels", "paste_patches", "scaled_cutout",
-           "splice"]
+__all__ = ["INPAINT_METHODS", "astronaut_cutout", "blur_within", "clone_fill",
+           "composite", "disc_alpha", "feathered_alpha", "inpaint", "move_pixels",
+           "paste_patches", "recolour", "scaled_cutout", "shifted", "splice"]
 
 INPAINT_METHODS = {"telea": cv2.INPAINT_TELEA, "ns": cv2.INPAINT_NS}
 
@@ -216,6 +216,58 @@ def move_pixels(image, mask, dx: int, dy: int, *, within=None, method: str = "cl
     footprint = (src | dst) & allowed
     out = np.where(footprint[..., None], out, image)
     return out, footprint
+
+
+def shifted(image, dx: int, dy: int):
+    """``image`` moved by (dx, dy) pixels (right, down): the clone stamp's source layer,
+    whose pixel (x, y) is the input's (x - dx, y - dy) (the edge repeated beyond it).
+    (H, W, 3) uint8 in and out."""
+    image = _check_image(image)
+    H, W = image.shape[:2]
+    ys = np.clip(np.arange(H) - int(dy), 0, H - 1)
+    xs = np.clip(np.arange(W) - int(dx), 0, W - 1)
+    return image[ys][:, xs].copy()
+
+
+def blur_within(image, within, sigma_px: float):
+    """A Gaussian blur (sigma in pixels) that reads only the pixels of ``within`` (an
+    editor's blur of a selection: nothing outside it bleeds in), in 8-bit sRGB.
+
+    Returns (H, W, 3) uint8, the blurred values at every pixel of ``within`` (a pixel
+    with no ``within`` pixel in reach keeps its own); the input elsewhere.
+    """
+    image = _check_image(image)
+    w = np.asarray(within, bool)
+    wf = w.astype(np.float32)
+    num = ndi.gaussian_filter(image.astype(np.float32) * wf[..., None],
+                              (sigma_px, sigma_px, 0))
+    den = ndi.gaussian_filter(wf, sigma_px)[..., None]
+    blurred = np.where(den > 1e-6, num / np.maximum(den, 1e-6), image)
+    out = np.rint(np.clip(blurred, 0, 255)).astype(np.uint8)
+    return np.where(w[..., None], out, image)
+
+
+def recolour(image, hue_deg: float, saturation: float):
+    """An editor's hue/saturation layer: every pixel's hue turned by ``hue_deg``
+    degrees and its saturation raised to at least ``saturation`` (0-1), so grey turns
+    coloured too; value kept. (H, W, 3) uint8 sRGB in and out."""
+    image = _check_image(image)
+    hsv = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2HSV)
+    hsv[..., 0] = np.mod(hsv[..., 0] + float(hue_deg), 360.0)
+    hsv[..., 1] = np.maximum(hsv[..., 1], float(saturation))
+    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    return np.rint(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def disc_alpha(shape, centre, radius_px: float, feather_px: float):
+    """A round brush's opacity: 1 inside the disc of ``radius_px`` about ``centre``
+    (u, v) pixels, falling linearly to 0 over ``feather_px`` across its edge, quantised
+    down to multiples of 1/255 (as :func:`feathered_alpha`). Returns (H, W) float32."""
+    H, W = shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float32)
+    dist = np.hypot(u - float(centre[0]), v - float(centre[1]))
+    a = np.clip((float(radius_px) - dist) / max(float(feather_px), 1e-6) + 0.5, 0.0, 1.0)
+    return np.floor(a * 255.0) / 255.0
 
 
 def feathered_alpha(cover, feather_px: float):

@@ -19,18 +19,36 @@ Kinds (the totems paper, Sec. 5 "Image manipulations", and its supplementary):
              totem pixels kept as they were (no blending trace; only geometry tells).
 ``insert``   the same with a new object added on the floor.
 
-``color``, ``splice`` and ``inpaint`` also work on a real photo (no ``truth/``) in a
-``region``; the others need ``truth/scene.json`` to render the scene again. Totem pixels
-are never changed, except by ``shift``, whose totem edits are listed in ``tamper.json``
-and drawn in ``truth/tamper_totem_mask.png``.
+The forgers who edit the totems too (issue 61, :data:`TOTEM_KINDS`):
+
+``totem-retouch``     one or more totems retouched by hand (a patch cloned from elsewhere
+                      in the same totem, blurred or recoloured), the camera view
+                      untouched (:mod:`scenes.tamper.totem2d`).
+``consistent-paste``  a ``splice``, also pasted shrunk and turned into every totem where
+                      a naive model of the glass puts it (:mod:`scenes.tamper.forger`).
+``erase-everywhere``  an ``inpaint`` of an object that a totem sees, and its refracted
+                      image (from the truth) inpainted out of every totem from the
+                      totem's own pixels.
+``rekey``             the adaptive forger: ``remove`` or ``insert`` re-rendered in the
+                      camera view and in the totems, the glass with a guessed key
+                      (:mod:`scenes.tamper.rekey`).
+
+``color``, ``splice``, ``inpaint``, ``totem-retouch`` and ``consistent-paste`` also work
+on a real photo (no ``truth/``; ``inpaint`` in a ``region``); the others need
+``truth/scene.json`` to render or trace the scene again. Totem pixels are changed only
+by ``shift`` and the kinds of :data:`TOTEM_KINDS`, whose totem edits are listed in
+``tamper.json`` and drawn in ``truth/tamper_totem_mask.png``.
 
 Images are handled as the 8-bit sRGB values of the file, so pixels outside the mask
 are the source's bit for bit. The copy's photo is always ``image.png``, also for a
 source with ``image.jpg``: a forger re-saves the decoded pixels (losslessly here).
 
 This module holds the verb (:func:`tamper`, :func:`parse_region`, the table of kinds,
-the writing of the copy) and the 2D editors. The re-rendering editors are in
-:mod:`scenes.tamper.tamper3d`, loaded (with Mitsuba) only for those kinds; what both share
+the writing of the copy) and the 2D editors of the camera view (with, for
+``consistent-paste`` and ``erase-everywhere``, their totem halves from
+:mod:`scenes.tamper.totem2d`). The re-rendering editors are in
+:mod:`scenes.tamper.tamper3d` and :mod:`scenes.tamper.rekey`, loaded (with Mitsuba) only
+for those kinds; what all share
 (:class:`~scenes.tamper.edits.Edit`, :class:`~scenes.tamper.edits.Source`, the target zone,
 the choice of an object) is in :mod:`scenes.tamper.edits`, the pixel tools in
 :mod:`scenes.tamper.edits2d`.
@@ -49,17 +67,28 @@ from scenes.errors import BadInput
 from scenes.tamper import edits2d
 from scenes.tamper.edits import Edit, Source, pick_object, target_zone
 
-__all__ = ["FORMAT", "KINDS", "NEEDS_TRUTH", "edit_color", "edit_inpaint", "edit_splice",
-           "parse_region", "tamper"]
+__all__ = ["FORMAT", "KINDS", "TOTEM_KINDS", "NEEDS_TRUTH", "REGION_KINDS", "OPTIONS",
+           "edit_color", "edit_consistent_paste", "edit_erase_everywhere", "edit_inpaint",
+           "edit_splice", "parse_region", "tamper"]
 
-KINDS = ("color", "splice", "inpaint", "shift", "remove", "insert")
-NEEDS_TRUTH = ("shift", "remove", "insert")
+TOTEM_KINDS = ("totem-retouch", "consistent-paste", "erase-everywhere", "rekey")
+"""The forgers who edit the totems as well as (or instead of) the camera view."""
+KINDS = ("color", "splice", "inpaint", "shift", "remove", "insert") + TOTEM_KINDS
+NEEDS_TRUTH = ("shift", "remove", "insert", "erase-everywhere", "rekey")
+REGION_KINDS = ("color", "splice", "inpaint", "remove", "consistent-paste",
+                "erase-everywhere", "rekey")
+"""The kinds a region applies to (where to paste or fill, or which object to take;
+``rekey`` only with its edit ``remove``)."""
+OPTIONS = {"tool": ("totem-retouch", "--tool"), "totems": ("totem-retouch", "--totem"),
+           "key_error": ("rekey", "--key-error"), "edit": ("rekey", "--edit")}
+"""The kinds' own options: argument of :func:`tamper` -> (its kind, its flag)."""
 FORMAT = 1
 
 
 # --------------------------------------------------------------------------- public
 
-def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
+def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None, tool=None,
+           totems=None, key_error=None, edit=None) -> Path:
     """Write a manipulated copy of the scene folder ``scene_dir`` at ``out``.
 
     Parameters
@@ -68,9 +97,17 @@ def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
     out : the new folder; must not exist (or be empty).
     kind : one of :data:`KINDS`.
     seed : random seed; the same seed gives the same forgery, bit for bit.
-    region : where to edit, for ``color``, ``splice`` and ``inpaint``: ``(x, y, w, h)``
-        in pixels or an (H, W) bool mask. Needed by ``inpaint`` on a photo without
-        ``truth/``; otherwise the edit goes above the totems, in the middle of the image.
+    region : where to edit, for the kinds of :data:`REGION_KINDS`: ``(x, y, w, h)``
+        in pixels or an (H, W) bool mask (``remove``, ``erase-everywhere`` and
+        ``rekey``'s ``remove`` take the object seen most in it). Needed by ``inpaint``
+        on a photo without ``truth/``; otherwise the edit goes above the totems, in the
+        middle of the image.
+    tool, totems : ``totem-retouch``'s tool (``clone``, ``blur`` or ``recolour``) and
+        the totems it retouches (indices, left to right); drawn per seed when None.
+    key_error : ``rekey``'s guessed key, as its error: ``"ior=0.02,radius=0.03"`` (and
+        ``pose=mask|exact``), a dict, or a :class:`scenes.tamper.forger.KeyGuess`; None
+        is no error with the pose from the masks.
+    edit : ``rekey``'s edit, ``remove`` or ``insert``; drawn per seed when None.
 
     Returns
     -------
@@ -78,11 +115,21 @@ def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
 
     Raises
     ------
-    BadInput for an unknown kind, a bad region, a scene that cannot be read, or a
-    kind that needs ``truth/scene.json`` on a scene without it.
+    BadInput for an unknown kind, a bad region or option (or one the kind does not
+    take), a scene that cannot be read, or a kind that needs ``truth/scene.json`` on a
+    scene without it.
     """
     if kind not in KINDS:
         raise BadInput(f"unknown tamper kind {kind!r}; use one of {', '.join(KINDS)}")
+    options = {k: v for k, v in dict(tool=tool, totems=totems, key_error=key_error,
+                                     edit=edit).items() if v is not None}
+    for name in options:
+        owner, flag = OPTIONS[name]
+        if owner != kind:
+            raise BadInput(f"{flag} applies to --kind {owner}, not to {kind}")
+    if kind == "rekey":
+        from scenes.tamper.forger import parse_key_error
+        options["key_error"] = parse_key_error(key_error)
     scene_dir = Path(scene_dir)
     out = Path(out)
     if out.resolve() == scene_dir.resolve():
@@ -91,19 +138,19 @@ def tamper(scene_dir, out, *, kind: str, seed: int = 0, region=None) -> Path:
     scene = folder.read_scene(scene_dir)
     truth = folder.read_truth(scene_dir)
     if kind in NEEDS_TRUTH and (truth is None or not truth.scene.get("objects")):
-        raise BadInput(f"--kind {kind} re-renders the scene and needs "
+        raise BadInput(f"--kind {kind} re-renders or traces the scene and needs "
                        f"truth/scene.json (a scene made by `totems scene make`); "
-                       f"{scene_dir} has none: use color, splice or inpaint")
-    if region is not None and kind in ("shift", "insert"):
-        raise BadInput(f"a region applies to color, splice, inpaint and remove, "
-                       f"not to {kind}")
+                       f"{scene_dir} has none: use color, splice, inpaint, "
+                       f"totem-retouch or consistent-paste")
+    if region is not None and kind not in REGION_KINDS:
+        raise BadInput(f"a region applies to {', '.join(REGION_KINDS)}, not to {kind}")
     image = _read_uint8(folder.photo_path(scene_dir))
     totems = scene.masks.any(axis=0)
     src = Source(scene_dir, image, scene, truth, totems,
-                 parse_region(region, image.shape[:2], totems))
+                 parse_region(region, image.shape[:2], totems), options)
     rng = np.random.default_rng([int(seed), KINDS.index(kind)])
     edit = _editor(kind)(src, rng)
-    if not edit.mask.any():
+    if not (edit.mask.any() or (edit.totem_mask is not None and edit.totem_mask.any())):
         raise BadInput(f"the {kind} edit changed no pixel of {scene_dir}; "
                        f"try another seed or region")
     edit.record.update(kind=kind, seed=int(seed))
@@ -210,22 +257,23 @@ def edit_splice(src: Source, rng) -> Edit:
                               "feather_px": feather})
 
 
-def edit_inpaint(src: Source, rng) -> Edit:
+def edit_inpaint(src: Source, rng, *, only=None) -> Edit:
     """An object removed and its place filled from nearby texture (content-aware
     fill's stand-in: :func:`edits2d.clone_fill`).
 
     With ``truth/scene.json`` and no region, the object is a removable one of the
-    scene and the fill covers its footprint in the camera view; otherwise the region.
+    scene (of the ids ``only``, if given; the region then only chooses it) and the fill
+    covers its footprint in the camera view; otherwise the region.
     """
     H, W = src.shape
     record = {}
     avoid = src.totems
-    if src.region is not None:
+    if src.region is not None and only is None:
         fill = src.region
     elif src.truth is not None and src.truth.scene.get("objects"):
         from scenes.synthetic import render
         ids = render.shape_ids(src.truth.scene, totems=True)
-        obj, footprint = pick_object(src, rng, ids=ids)
+        obj, footprint = pick_object(src, rng, ids=ids, only=only)
         grow = max(1, round(0.004 * W))
         fill = masks.dilate(footprint, grow) & ~src.totems
         # texture is copied from the room, not from the other objects
@@ -240,6 +288,29 @@ def edit_inpaint(src: Source, rng) -> Edit:
     record["method"] = "clone+telea" if offset else "telea"
     record["clone_offset_px"] = offset
     return Edit(image, mask, record)
+
+
+# --------------------------------------------------------------------------- totems too
+
+def edit_consistent_paste(src: Source, rng) -> Edit:
+    """``consistent-paste``: :func:`edit_splice`, and the person pasted into every totem
+    too where the naive model of the glass puts it
+    (:func:`scenes.tamper.totem2d.paste_in_totems`)."""
+    from scenes.tamper import totem2d
+
+    return totem2d.paste_in_totems(src, edit_splice(src, rng))
+
+
+def edit_erase_everywhere(src: Source, rng) -> Edit:
+    """``erase-everywhere``: :func:`edit_inpaint` of a removable object that a totem
+    sees (in the region, if given), and its refracted image, traced from the truth,
+    filled out of every totem from the totem's own pixels
+    (:func:`scenes.tamper.totem2d.erase_in_totems`)."""
+    from scenes.tamper import totem2d
+
+    footprints = totem2d.object_footprints(src)
+    edit = edit_inpaint(src, rng, only=set(footprints))
+    return totem2d.erase_in_totems(src, edit, footprints[edit.record["object"]["id"]])
 
 
 # --------------------------------------------------------------------------- helpers
@@ -265,6 +336,8 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
     files = _copy_files(src.path)
     mask = edit.mask & ~src.totems
     manip = mask
+    totem_mask = None if edit.totem_mask is None else edit.totem_mask & src.totems
+    all_totem = totem_mask
     history = []
     if src.scene.manip_mask is not None:           # forging a forgery: masks add up
         manip = manip | src.scene.manip_mask
@@ -273,6 +346,10 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
             prev = json.loads(old)
             history = prev.get("history", []) + [{k: v for k, v in prev.items()
                                                   if k != "history"}]
+    old_totem = src.path / "truth" / "tamper_totem_mask.png"
+    if old_totem.is_file():
+        prev_mask = folder.read_mask(old_totem, what="truth/tamper_totem_mask.png")
+        all_totem = prev_mask if all_totem is None else all_totem | prev_mask
     H, W = src.shape
     record = {"format": FORMAT, **edit.record,
               "source": {"folder": src.path.name,
@@ -280,11 +357,11 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
                              folder.photo_path(src.path).read_bytes()).hexdigest()},
               "changed_pixels": int(mask.sum()),
               "changed_fraction": round(float(mask.sum()) / (H * W), 6),
-              "bbox": list(masks.bbox(mask)),
-              "totems_edited": edit.totem_mask is not None}
-    if edit.totem_mask is not None:
+              "bbox": list(masks.bbox(mask)) if mask.any() else None,
+              "totems_edited": totem_mask is not None}
+    if totem_mask is not None:
         record["totem_mask"] = "truth/tamper_totem_mask.png"
-        record["totem_changed_pixels"] = int(edit.totem_mask.sum())
+        record["totem_changed_pixels"] = int(totem_mask.sum())
     if history:
         record["history"] = history
     with folder.staged_folder(out) as tmp:
@@ -292,16 +369,24 @@ def _write_copy(src: Source, out: Path, edit: Edit) -> Path:
             folder.write_bytes(tmp / rel, data)
         folder.write_image(tmp / "image.png", edit.image)
         folder.write_image(tmp / "manip_mask.png", manip)
-        if edit.totem_mask is not None:
-            folder.write_image(tmp / "truth" / "tamper_totem_mask.png", edit.totem_mask)
+        if all_totem is not None:
+            folder.write_image(tmp / "truth" / "tamper_totem_mask.png", all_totem)
         folder.write_json(tmp / "truth" / "tamper.json", record)
     return out
 
 
 def _editor(kind: str):
     """The function making a ``kind`` of edit: ``(Source, rng) -> Edit``."""
-    if kind in NEEDS_TRUTH:
+    if kind in ("shift", "remove", "insert"):
         from scenes.tamper import tamper3d  # imports render (Mitsuba) only when needed
         return {"shift": tamper3d.edit_shift, "remove": tamper3d.edit_remove,
                 "insert": tamper3d.edit_insert}[kind]
-    return {"color": edit_color, "splice": edit_splice, "inpaint": edit_inpaint}[kind]
+    if kind == "totem-retouch":
+        from scenes.tamper import totem2d
+        return totem2d.edit_totem_retouch
+    if kind == "rekey":
+        from scenes.tamper import rekey
+        return rekey.edit_rekey
+    return {"color": edit_color, "splice": edit_splice, "inpaint": edit_inpaint,
+            "consistent-paste": edit_consistent_paste,
+            "erase-everywhere": edit_erase_everywhere}[kind]

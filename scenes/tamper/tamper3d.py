@@ -4,7 +4,10 @@
 Mitsuba with an object left out (or a new one standing on the floor), with the same
 sampler seed and samples per pixel as the original, and composited into the source
 where the change is visible; the totem pixels stay those of the original scene. No
-blending trace is left: only the geometry seen through the totems disagrees.
+blending trace is left: only the geometry seen through the totems disagrees. What is
+changed is planned first (:func:`plan_remove`, :func:`plan_insert`: a :class:`Plan`),
+then rendered (:func:`rerender`) and composited (:func:`composite_view`), so that the
+forger who re-renders the totems too (:mod:`scenes.tamper.rekey`) makes the same edit.
 
 ``shift``: the paper's reference shift. An object (with its shadow) is moved in the
 camera view and, by 2D edits, in every totem view, to where the same new position
@@ -23,6 +26,7 @@ inside the functions.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -32,8 +36,9 @@ from scenes.errors import BadInput
 from scenes.tamper import edits2d
 from scenes.tamper.edits import Edit, Source, pick_object, target_zone
 
-__all__ = ["STRONG_DIFF", "VISIBLE_DIFF", "edit_insert", "edit_remove", "edit_shift",
-           "floor_plane", "new_object", "render8", "render_settings", "visible_change"]
+__all__ = ["STRONG_DIFF", "VISIBLE_DIFF", "Plan", "composite_view", "edit_insert",
+           "edit_remove", "edit_shift", "floor_plane", "new_object", "plan_insert",
+           "plan_remove", "render8", "render_settings", "rerender", "visible_change"]
 
 VISIBLE_DIFF = 6.0      # 8-bit levels, after a 3x3 mean: a change one can see
 STRONG_DIFF = 16.0      # 8-bit levels in one pixel: a change whatever its size
@@ -80,29 +85,55 @@ def visible_change(a: np.ndarray, b: np.ndarray, *, min_px: int = 4) -> np.ndarr
     return ndi.binary_dilation(m, structure=np.ones((3, 3)))
 
 
-def _rerender_edit(src: Source, new_desc: dict, exclude_ids, footprint, record) -> Edit:
-    """Composite a render of ``new_desc`` into the source where it visibly differs
-    from a render of the original with the same sampler; totem pixels kept."""
+@dataclass
+class Plan:
+    """A re-rendering edit before it is rendered: the scene as the forger wants it."""
+
+    new_desc: dict              # the edited description (an object added, or as it was)
+    exclude_ids: tuple          # ids left out of ``new_desc`` when rendered (a removal)
+    footprint: np.ndarray       # (H, W) bool, the object's directly seen pixels
+    record: dict                # what tamper.json records of it (``object``)
+
+
+def rerender(src: Source, plan: Plan, *, base_desc: dict | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The source scene (or ``base_desc``) and the planned one rendered with the
+    source's sampler (8-bit sRGB, (H, W, 3) uint8 each, totems drawn): (base, new)."""
     desc = src.truth.scene
     rs = render_settings(desc)
+    base = render8(desc if base_desc is None else base_desc, spp=rs["spp"], seed=rs["seed"])
+    new = render8(plan.new_desc, spp=rs["spp"], seed=rs["seed"],
+                  exclude_ids=plan.exclude_ids)
+    return base, new
+
+
+def composite_view(src: Source, plan: Plan, base: np.ndarray, new: np.ndarray) -> Edit:
+    """The render of the plan (``new``) composited into the source where it visibly
+    differs from the source scene's (``base``, the same sampler), or where the object
+    is; totem pixels kept."""
     H, W = src.shape
-    base = render8(desc, spp=rs["spp"], seed=rs["seed"])
-    new = render8(new_desc, spp=rs["spp"], seed=rs["seed"], exclude_ids=exclude_ids)
     min_px = max(4, int(2e-4 * H * W))
-    mask = (visible_change(new, base, min_px=min_px) | footprint) & ~src.totems
+    mask = (visible_change(new, base, min_px=min_px) | plan.footprint) & ~src.totems
     image = np.where(mask[..., None], new, src.image)
-    record.update(render=rs, base_equals_source=round(
-        float((base == src.image).all(axis=-1).mean()), 6))
+    record = dict(plan.record, render=render_settings(src.truth.scene),
+                  base_equals_source=round(
+                      float((base == src.image).all(axis=-1).mean()), 6))
     return Edit(image, mask, record)
 
 
 # --------------------------------------------------------------------------- remove
 
+def plan_remove(src: Source, rng) -> Plan:
+    """A removable object in view (:func:`scenes.tamper.edits.pick_object`) left out."""
+    obj, seen = pick_object(src, rng)
+    return Plan(src.truth.scene, (obj["id"],), seen,
+                {"object": {"id": obj["id"], "name": obj.get("name")}})
+
+
 def edit_remove(src: Source, rng) -> Edit:
     """A removable object rendered away (the perfect content-aware fill)."""
-    obj, seen = pick_object(src, rng)
-    return _rerender_edit(src, src.truth.scene, [obj["id"]], seen,
-                          {"object": {"id": obj["id"], "name": obj.get("name")}})
+    plan = plan_remove(src, rng)
+    return composite_view(src, plan, *rerender(src, plan))
 
 
 # --------------------------------------------------------------------------- insert
@@ -174,8 +205,9 @@ def _floor_point(K, u, v, p0, n):
     return d * t if t > 0 else None
 
 
-def edit_insert(src: Source, rng) -> Edit:
-    """A new object rendered standing on the floor, above the totems, in view."""
+def plan_insert(src: Source, rng) -> Plan:
+    """A new object standing on the floor, above the totems, in view (BadInput when no
+    place is found)."""
     from scenes.synthetic import render
 
     desc = src.truth.scene
@@ -209,10 +241,15 @@ def edit_insert(src: Source, rng) -> Edit:
         new_desc["objects"].append(obj)
         seen = render.shape_ids(new_desc, totems=True) == new_id
         if seen.sum() >= max(20, 2e-3 * H * W) and (seen & zone).sum() >= 0.7 * seen.sum():
-            return _rerender_edit(src, new_desc, (), seen & ~src.totems,
-                                  {"object": obj})
+            return Plan(new_desc, (), seen & ~src.totems, {"object": obj})
     raise BadInput("could not place a new object on the floor in view above the "
                    "totems; try another seed")
+
+
+def edit_insert(src: Source, rng) -> Edit:
+    """A new object rendered standing on the floor, above the totems, in view."""
+    plan = plan_insert(src, rng)
+    return composite_view(src, plan, *rerender(src, plan))
 
 
 # --------------------------------------------------------------------------- shift

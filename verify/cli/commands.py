@@ -63,7 +63,8 @@ def cmd_tamper(args) -> dict:
     region = args.region
     if args.region_mask:
         region = read_mask(args.region_mask, what="region mask")
-    out = tamper(args.scene, args.out, kind=args.kind, seed=args.seed, region=region)
+    out = tamper(args.scene, args.out, kind=args.kind, seed=args.seed, region=region,
+                 tool=args.tool, totems=args.totem, key_error=args.key_error, edit=args.edit)
     return {"scene": str(out), "kind": args.kind, "seed": args.seed}
 
 
@@ -312,11 +313,24 @@ def _scene_verbs(verb, sub) -> None:
     v.add_argument("scene")
     v.add_argument("out")
     v.add_argument("--kind", required=True,
-                   choices=("color", "splice", "inpaint", "shift", "remove", "insert"))
+                   choices=("color", "splice", "inpaint", "shift", "remove", "insert",
+                            "totem-retouch", "consistent-paste", "erase-everywhere",
+                            "rekey"))
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--region", type=arguments.region, default=None,
                    help="x,y,w,h region to edit (photos without truth/)")
     v.add_argument("--region-mask", default=None, help="PNG mask of the region to edit")
+    v.add_argument("--tool", choices=("clone", "blur", "recolour"), default=None,
+                   help="totem-retouch: the tool (default: drawn per totem)")
+    v.add_argument("--totem", type=int, action="append", default=None, metavar="J",
+                   help="totem-retouch: a totem to retouch, 0 the leftmost; repeat for "
+                        "more (default: drawn)")
+    v.add_argument("--key-error", default=None, metavar="SPEC",
+                   help="rekey: the forger's key off by this much, "
+                        "ior=D,radius=F[,pose=mask|exact] (radius relative; default: "
+                        "no error, the pose from the masks)")
+    v.add_argument("--edit", choices=("remove", "insert"), default=None,
+                   help="rekey: the edit (default: drawn)")
 
     v = verb("recapture", cmd_recapture, "write a copy of a scene folder whose photo went "
              "through a camera and a messenger: blur, tone curve, noise, sharpening, "
