@@ -17,7 +17,7 @@ from scipy import ndimage
 from scenes import camera, folder
 from scenes.errors import BadInput
 from scenes.plan.predict import (check_placement, fronto_plane, predict, sent_on,
-                                 subject_plane, totem_image)
+                                 subject_hits, subject_plane, totem_image)
 from scenes.reach import COS_EVIDENCE, MIN_PARALLAX, Reach
 
 W, H = 400, 300
@@ -125,6 +125,24 @@ def test_a_totem_hides_what_lies_behind_it_and_its_own_pixels_are_excluded():
     np.testing.assert_array_equal(labels >= 0, expected)
     pred = predict(K, (W, H), P, R, ETA, fronto_plane(4.0))
     assert not pred.reach.in_reach()[labels >= 0].any()
+
+
+def test_a_ray_that_would_land_beside_the_subject_passes_it_by():
+    """The subject is the plane within its region: a ray meeting the plane where the
+    camera sees the region lands there; one meeting it beside the region, or behind the
+    ray's start, lands nowhere."""
+    plane = fronto_plane(4.0)
+    region = np.zeros((H, W), bool)
+    region[100:200, 150:250] = True                       # the subject's box
+    o = np.array([[0.3, 0.2, 1.5]] * 3)
+    inside = np.array([0.0, 0.0, 4.0])                    # the image centre: in the box
+    beside = np.array([1.5, 0.0, 4.0])                    # right of the box
+    d = np.stack([inside - o[0], beside - o[1], o[2] - inside])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    Y = subject_hits(o, d, plane, K, region)
+    np.testing.assert_allclose(Y[0], inside, atol=1e-12)
+    assert np.isnan(Y[1]).all() and np.isnan(Y[2]).all()
+    np.testing.assert_allclose(subject_hits(o[:2], d[:2], plane)[1], beside, atol=1e-12)
 
 
 def test_a_tilted_plane_is_turned_to_face_the_camera():

@@ -4,8 +4,9 @@ the single move that widens it most (``totems plan``).
 The photo will be judged at the working resolution (:mod:`scenes.working`), where the
 totems' rays are as far apart as the verdict reads them, so the plan is made there;
 pixel positions in and out are the photo's own. The subject is a plane
-(:mod:`scenes.plan.predict` says what that leaves out); its region is the pixels given,
-or the whole frame above the highest totem.
+(:mod:`scenes.plan.predict` says what that leaves out) within its region, the pixels
+given or the whole frame above the highest totem: a totem ray that would meet the plane
+outside the region passes the subject by, as a ray beside a person does.
 
 Frames and units: the OpenCV camera frame (+x right, +y down, +z forward), metres;
 pixels (u, v) with centres at integers.
@@ -19,17 +20,18 @@ import numpy as np
 
 from scenes import camera
 from scenes.errors import BadInput
-from scenes.plan.predict import Plane, Prediction, check_placement, predict, seen_shares
+from scenes.plan.predict import (Plane, Prediction, check_placement, grid_points, predict,
+                                 seen_shares, totem_image)
 from scenes.plan.suggest import Move, best_move, sample_pixels
 from scenes.reach import COS_EVIDENCE, MIN_PARALLAX
 from scenes.working import block_mean, scale_intrinsics, working_factor
 
 __all__ = ["APPROXIMATION", "MIN_ABOVE", "Plan", "region_box", "above_totems", "make_plan"]
 
-APPROXIMATION = ("the subject is taken as a plane, and nothing but the totems hides it "
-                 "from them: a subject with depth, or a chair, the floor under resting "
-                 "totems or a stand's post between a totem and the subject, is not "
-                 "modelled")
+APPROXIMATION = ("the subject is taken as a plane within its region, and nothing but the "
+                 "totems hides it from them: a subject with depth, or a chair, the floor "
+                 "under resting totems or a stand's post between a totem and the "
+                 "subject, is not modelled")
 
 
 @dataclass
@@ -156,9 +158,8 @@ def make_plan(K, size, centers, radius, ior, plane: Plane, *, region=None,
     radius = np.broadcast_to(np.asarray(radius, np.float64), (n,)).copy()
     ior = np.broadcast_to(np.asarray(ior, np.float64), (n,)).copy()
     check_placement(Kw, sw, centers, radius, plane)
-    pred = predict(Kw, sw, centers, radius, ior, plane)
     if region is None:
-        how, mask = "above the totems", above_totems(pred.labels)
+        how, mask = "above the totems", above_totems(totem_image(Kw, sw, centers, radius))
         if mask.mean() < MIN_ABOVE:
             raise BadInput("a totem stands at the top of the frame, so there is no frame "
                            "above the totems: give the subject's region (--subject-region)")
@@ -169,14 +170,15 @@ def make_plan(K, size, centers, radius, ior, plane: Plane, *, region=None,
                            f"the frame is {W}x{H}")
         how = region_from
         mask = region if f == 1 else block_mean(region, f) >= 0.5
-    meets = np.isfinite(pred.reach.depth)
+    meets = np.isfinite(grid_points(Kw, sw, plane)[1][..., 2])
     if not (mask & meets).any():
         raise BadInput("the subject is behind the camera: no pixel of the subject region "
                        "sees its plane in front")
     mask = mask & meets
+    pred = predict(Kw, sw, centers, radius, ior, plane, region=mask)
     inside = pred.reach.in_reach()[mask]
     u, v, _ = sample_pixels(mask)
-    sees = seen_shares(Kw, sw, centers, radius, ior, plane, u, v)
+    sees = seen_shares(Kw, sw, centers, radius, ior, plane, u, v, region=mask)
     move = best_move(Kw, sw, centers, radius, ior, plane, mask) if suggest else None
     return Plan(K=Kw, size=sw, scale=f, centers=centers, radius=radius, ior=ior,
                 plane=plane, region=mask, region_from=how, prediction=pred,

@@ -3,7 +3,8 @@
 Before the shot there is nothing to trace: the subject is a plane (a person a few metres
 away nearly is one, as the totems see it), the camera's ray through each pixel meets it
 at ``X``, and each totem pixel's ray, refracted through the key's sphere
-(:func:`scenes.refraction.refract_sphere`), leaves the glass and meets it at ``Y``. The
+(:func:`scenes.refraction.refract_sphere`), leaves the glass and meets it at ``Y``, or
+passes it by where the plane beyond the subject's region would be. The
 rays kept are those the truth's reach keeps (:func:`scenes.synthetic.trace.truth_reach`):
 transmitting more than :data:`~scenes.refraction.MIN_TRANSMITTANCE`, entered at an
 incidence cosine of at least :data:`~scenes.reach.COS_EVIDENCE`, and not into another
@@ -28,10 +29,10 @@ from scenes.errors import BadInput
 from scenes.reach import COS_EVIDENCE, Reach, reach_map
 from scenes.refraction import MIN_TRANSMITTANCE, entry_cosine, refract_sphere, transmittance
 
-__all__ = ["MIN_GAP", "Plane", "subject_plane", "fronto_plane", "plane_hits", "disc_box",
-           "disc_pixels", "entry_distance", "totem_image", "check_placement", "TotemRays",
-           "sent_on", "totem_rays", "grid_points",
-           "Prediction", "plane_reach", "seen_by", "predict", "seen_shares"]
+__all__ = ["MIN_GAP", "Plane", "subject_plane", "fronto_plane", "plane_hits", "subject_hits",
+           "disc_box", "disc_pixels", "entry_distance", "totem_image", "check_placement",
+           "TotemRays", "sent_on", "totem_rays", "grid_points", "Prediction", "plane_reach",
+           "seen_by", "predict", "seen_shares"]
 
 MIN_GAP = 0.01
 """A sphere's nearest point must be this far (metres) from the camera's centre."""
@@ -79,6 +80,22 @@ def plane_hits(o, d, plane: Plane) -> np.ndarray:
         t = ((plane.point - o) @ plane.normal) / along
     ok = (np.abs(along) > 1e-9) & (t > 0)
     return np.where(ok[:, None], o + np.where(ok, t, 0.0)[:, None] * d, np.nan)
+
+
+def subject_hits(o, d, plane: Plane, K=None, region=None) -> np.ndarray:
+    """Where rays meet the subject: :func:`plane_hits`, and NaN too where the point lies
+    outside ``region`` ((H, W) bool, the pixels the subject fills in a camera ``K``), as
+    the ray passes the subject by. Without a region, the plane has no edge."""
+    Y = plane_hits(o, d, plane)
+    if region is None:
+        return Y
+    H, W = region.shape
+    ok = np.isfinite(Y).all(1)
+    uv = np.rint(camera.project(K, Y[ok])).astype(np.int64)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+    on = np.zeros(len(Y), bool)
+    on[np.flatnonzero(ok)[inside]] = region[uv[inside, 1], uv[inside, 0]]
+    return np.where(on[:, None], Y, np.nan)
 
 
 def disc_box(K, center, radius: float) -> tuple[float, float, float, float]:
@@ -237,11 +254,12 @@ def totem_rays(K, labels, centers, radius, ior, *,
     return TotemRays(*(np.concatenate(x) for x in zip(*parts)))
 
 
-def grid_points(K, size, plane: Plane, step: int = 1):
-    """The camera's rays through pixels ``v[::step], u[::step]`` and where they meet the
-    plane: (view (h, w, 3) unit, X (h, w, 3) metres, NaN where a ray misses it)."""
+def grid_points(K, size, plane: Plane):
+    """The camera's rays through every pixel of a frame of ``size`` (W, H) and where
+    they meet the plane: (view (H, W, 3) unit, X (H, W, 3) metres, NaN where a ray
+    misses it)."""
     W, H = size
-    v, u = np.mgrid[0:H:step, 0:W:step]
+    v, u = np.mgrid[0:H, 0:W]
     view = camera.pixel_rays(K, u, v)
     X = plane_hits(np.zeros((view.size // 3, 3)), view.reshape(-1, 3), plane)
     return view, X.reshape(view.shape)
@@ -249,33 +267,36 @@ def grid_points(K, size, plane: Plane, step: int = 1):
 
 @dataclass
 class Prediction:
-    """The reach a placement predicts on a pixel grid.
+    """The reach a placement predicts.
 
     Attributes
     ----------
-    reach : :class:`scenes.reach.Reach` on the grid (h, w).
-    labels : (h, w) int, the totem each pixel images (-1 none).
-    step : the grid's stride in pixels (1: every pixel).
+    reach : :class:`scenes.reach.Reach` over the frame (H, W).
+    labels : (H, W) int, the totem each pixel images (-1 none).
     """
 
     reach: Reach
     labels: np.ndarray
-    step: int
 
 
-def plane_reach(view, X, excluded, centers, rays: TotemRays, plane: Plane) -> Reach:
+def plane_reach(view, X, excluded, centers, rays: TotemRays, plane: Plane, *, K=None,
+                region=None) -> Reach:
     """:func:`scenes.reach.reach_map` of camera points ``X`` ((h, w, 3) m, along unit
-    ``view``; ``excluded`` (h, w)) and totem ``rays`` meeting ``plane``."""
-    Y = plane_hits(rays.o, rays.d, plane)
+    ``view``; ``excluded`` (h, w)) and totem ``rays`` meeting the subject
+    (:func:`subject_hits`: ``plane``, within ``region`` as camera ``K`` sees it)."""
+    Y = subject_hits(rays.o, rays.d, plane, K, region)
     normal = np.broadcast_to(plane.normal, Y.shape)
     return reach_map(view, X, excluded, centers, o=rays.o, d=rays.d, Y=Y, normal=normal,
                      totem=rays.totem)
 
 
-def seen_by(view, X, excluded, center, rays: TotemRays, plane: Plane):
+def seen_by(view, X, excluded, center, rays: TotemRays, plane: Plane, *, K=None,
+            region=None):
     """Which points one totem (centre (3,) m, its ``rays`` numbered 0) sees, by the
-    reach's rule: ((h, w) bool, its rays' angular spacing in radians)."""
-    r = plane_reach(view, X, excluded, np.asarray(center, np.float64)[None], rays, plane)
+    reach's rule (the subject as :func:`plane_reach` takes it): ((h, w) bool, its rays'
+    angular spacing in radians)."""
+    r = plane_reach(view, X, excluded, np.asarray(center, np.float64)[None], rays, plane,
+                    K=K, region=region)
     return r.n_totems > 0, float(r.spacing[0])
 
 
@@ -286,31 +307,41 @@ def _key(centers, radius, ior):
             np.broadcast_to(np.asarray(ior, np.float64), (n,)))
 
 
-def predict(K, size, centers, radius, ior, plane: Plane, *, step: int = 1,
+def predict(K, size, centers, radius, ior, plane: Plane, *, region=None,
             cos_min: float = COS_EVIDENCE) -> Prediction:
     """The reach of totems (``centers`` (n, 3) m, ``radius`` (n,) m, ``ior`` (n,)) seen
-    by a camera ``K`` of ``size`` (W, H) px, on the subject's ``plane``, at pixels
-    ``v[::step], u[::step]``. The totems' own rays are those of every pixel of their
-    images (``step`` thins the camera's grid, not the totems': their rays' spacing is
-    what the verdict reads at this size)."""
+    by a camera ``K`` of ``size`` (W, H) px, on the subject's ``plane``: over the whole
+    frame, or, given ``region`` ((H, W) bool, the pixels the subject fills), over the
+    subject alone (a ray landing on the plane beyond the region passes it by, and no
+    pixel outside it is counted as seen)."""
+    W, H = size
     centers, radius, ior = _key(centers, radius, ior)
     labels = totem_image(K, size, centers, radius)
     rays = totem_rays(K, labels, centers, radius, ior, cos_min=cos_min)
-    view, X = grid_points(K, size, plane, step)
-    grid_labels = labels[::step, ::step]
-    reach = plane_reach(view, X, grid_labels >= 0, centers, rays, plane)
-    return Prediction(reach, grid_labels, step)
+    view, X = grid_points(K, size, plane)
+    where = np.ones((H, W), bool) if region is None else np.asarray(region, bool)
+    r = plane_reach(view[where][None], X[where][None], (labels >= 0)[where][None], centers,
+                    rays, plane, K=K, region=region)
+    n_totems, parallax, backdrop = (np.zeros((H, W), a.dtype) for a in
+                                    (r.n_totems, r.parallax, r.backdrop))
+    n_totems[where], parallax[where], backdrop[where] = r.n_totems[0], r.parallax[0], \
+        r.backdrop[0]
+    depth = np.where(np.isfinite(X[..., 2]), X[..., 2], np.inf).astype(np.float32)
+    reach = Reach(depth=depth, n_totems=n_totems, parallax=parallax, backdrop=backdrop,
+                  excluded=labels >= 0, spacing=r.spacing)
+    return Prediction(reach, labels)
 
 
-def seen_shares(K, size, centers, radius, ior, plane: Plane, u, v, *,
+def seen_shares(K, size, centers, radius, ior, plane: Plane, u, v, *, region=None,
                 cos_min: float = COS_EVIDENCE) -> np.ndarray:
-    """(n,) the share of pixels (u, v) whose point of the plane each totem sees (pixels a
-    totem hides count as unseen)."""
+    """(n,) the share of pixels (u, v) whose point of the subject (``plane`` within
+    ``region``, as :func:`predict` takes it) each totem sees (pixels a totem hides count
+    as unseen)."""
     centers, radius, ior = _key(centers, radius, ior)
     labels = totem_image(K, size, centers, radius)
     rays = totem_rays(K, labels, centers, radius, ior, cos_min=cos_min)
     view = camera.pixel_rays(K, u, v)
     X = plane_hits(np.zeros_like(view), view, plane)
     hidden = (labels[v, u] >= 0)[None]
-    return np.array([seen_by(view[None], X[None], hidden, centers[j], rays.of(j), plane)[0]
-                     .mean() for j in range(len(centers))])
+    return np.array([seen_by(view[None], X[None], hidden, centers[j], rays.of(j), plane,
+                             K=K, region=region)[0].mean() for j in range(len(centers))])

@@ -31,10 +31,10 @@ from scenes.reach import MIN_PARALLAX, pair_parallax
 __all__ = ["SAMPLES", "COARSE", "DISTANCE_FACTORS", "MIN_GAIN", "Move", "sample_pixels",
            "region_share", "best_move"]
 
-SAMPLES = 3000
-"""About this many of the region's pixels score a move (a share to about 1 point)."""
+SAMPLES = 2000
+"""About this many of the region's pixels score a move (a share to about a point)."""
 
-COARSE = (7, 5)
+COARSE = (6, 4)
 """Image positions tried per totem: columns x rows, evenly over the frame."""
 
 DISTANCE_FACTORS = (0.6, 1.0, 1.6)
@@ -84,14 +84,15 @@ def _points(K, u, v, plane: Plane):
     return view[None], X[None]
 
 
-def region_share(K, size, centers, radius, ior, plane: Plane, u, v) -> float:
+def region_share(K, size, centers, radius, ior, plane: Plane, u, v, region=None) -> float:
     """The share of pixels (u, v) in the reach of the totems, by
-    :func:`scenes.reach.reach_map` over all of them (the plan's rule)."""
+    :func:`scenes.reach.reach_map` over all of them (the plan's rule; the subject the
+    ``plane`` within ``region``)."""
     labels = totem_image(K, size, centers, radius)
     rays = totem_rays(K, labels, centers, radius, ior)
     view, X = _points(K, u, v, plane)
     r = plane_reach(view, X, (labels[v, u] >= 0)[None], np.asarray(centers, np.float64),
-                    rays, plane)
+                    rays, plane, K=K, region=region)
     return float(r.in_reach()[0].mean())
 
 
@@ -113,7 +114,7 @@ class _Screen:
         self.hides = np.zeros((n, k), bool)       # which sample pixels each totem hides
         for j in range(n):
             s, self.spacing[j] = seen_by(self.view, self.X, self.none, self.centers[j],
-                                         rays.of(j), plane)
+                                         rays.of(j), plane, K=K, region=region)
             self.seen[j] = s[0]
             self.hides[j] = np.isfinite(entry_distance(K, u, v, self.centers[j],
                                                        self.radius[j]))
@@ -147,7 +148,8 @@ class _Screen:
         if len(d) < 8:
             return 0.0
         seen_j, spacing_j = seen_by(self.view, self.X, self.none, P,
-                                    TotemRays(o, d, np.zeros(len(d), np.int64)), self.plane)
+                                    TotemRays(o, d, np.zeros(len(d), np.int64)), self.plane,
+                                    K=self.K, region=self.region)
         covered = np.zeros(len(self.u), bool)
         for (a, b), c in self.pair.items():
             if j not in (a, b):
@@ -186,7 +188,7 @@ def best_move(K, size, centers, radius, ior, plane: Plane, region, *,
     if len(u) == 0:
         return None
     screen = _Screen(K, size, centers, radius, ior, plane, u, v, region)
-    before = region_share(K, size, centers, radius, ior, plane, u, v)
+    before = region_share(K, size, centers, radius, ior, plane, u, v, region)
     best = (before + MIN_GAIN, None, None)
     cols, rows = COARSE
     du, dv = (W - 1) / (cols + 1), (H - 1) / (rows + 1)
@@ -210,7 +212,7 @@ def best_move(K, size, centers, radius, ior, plane: Plane, region, *,
     s, j, P = best
     moved = centers.copy()
     moved[j] = P
-    after = region_share(K, size, moved, radius, ior, plane, u, v)
+    after = region_share(K, size, moved, radius, ior, plane, u, v, region)
     if after - before < MIN_GAIN:
         return None
     return Move(totem=int(j), center=P, uv=camera.project(K, P),
