@@ -6,8 +6,9 @@ The modules here are the core every other room stands on: the scene folder and i
 of the camera view and the parallax rule (`reach`), colour (`colour`), selections of the
 image (`masks`), the working resolution (`working`), the Dr.Jit backend (`backend`) and
 the one bad-input error (`errors`). Around them: `synthetic` (presets rendered with Mitsuba, with their truth),
-`channel` (what a camera and a messenger do to a photo), `tamper` (the manipulations) and
-`photo` (real photos: calibration, ingest, masks). Frames and units: docs/contract.md.
+`channel` (what a camera and a messenger do to a photo), `tamper` (the manipulations),
+`photo` (real photos: calibration, ingest, masks) and `plan` (where to put the totems:
+the reach a placement predicts before the shot). Frames and units: docs/contract.md.
 
 May import: nothing else of totems (the core); each subpackage says its own.
 """

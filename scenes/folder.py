@@ -35,10 +35,11 @@ PHOTO_NAMES = ("image.png", "image.jpg", "image.jpeg")   # the photo: exactly on
 
 # --------------------------------------------------------------------------- the key
 
-def read_key(path, n_totems: int) -> tuple[np.ndarray, np.ndarray]:
+def read_key(path, n_totems: int, *, what: str = "masks") -> tuple[np.ndarray, np.ndarray]:
     """Read ``totems.json``: radius (m) and IoR, one value for all or one per totem.
 
-    Returns (radius, ior), each of shape (n_totems,).
+    Returns (radius, ior), each of shape (n_totems,). ``what`` names the totems counted
+    (a photo's masks, a plan's totems) when the key lists another number.
     """
     path = Path(path)
     if not path.is_file():
@@ -50,7 +51,7 @@ def read_key(path, n_totems: int) -> tuple[np.ndarray, np.ndarray]:
     entries = data if isinstance(data, list) else [data] * n_totems
     if len(entries) != n_totems:
         raise BadInput(f"{path} lists {len(entries)} totems but there are "
-                       f"{n_totems} masks")
+                       f"{n_totems} {what}")
     radius, ior = [], []
     for e in entries:
         if not isinstance(e, dict) or "radius" not in e or "ior" not in e:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size", "size_any", "region", "point", "positive", "engine", "tls"]
+__all__ = ["size", "size_any", "region", "point", "numbers", "positive", "ior", "engine",
+           "scene_make", "plan", "tls"]
 
 
 def size(text: str) -> tuple[int, int]:
@@ -41,6 +42,34 @@ def point(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected two numbers A,B, got {text!r}") \
             from None
     return a, b
+
+
+def numbers(n: int, what: str):
+    """A type for ``n`` comma-separated numbers (``what`` names them in the error)."""
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(x) for x in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != n or not all(map(_finite, values)):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return values
+    return parse
+
+
+def _finite(x: float) -> bool:
+    return x == x and abs(x) != float("inf")
+
+
+def ior(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 1.0 < v < 4.0:
+        raise argparse.ArgumentTypeError(f"the index of refraction must lie in (1, 4), "
+                                         f"got {text}")
+    return v
 
 
 def positive(kind):
@@ -91,6 +120,48 @@ def scene_make(v) -> None:
     v.add_argument("--camera", action="store_true",
                    help="a realistic camera: photon and read noise on the linear render, "
                         "before the sRGB tone curve (off: the render as it is)")
+
+
+def plan(v) -> None:
+    """The options of ``totems plan``: the camera, the key, the totems, the subject."""
+    cam = v.add_argument_group("the camera (--photo, or --calib or --fov with --size)")
+    cam.add_argument("--photo", default=None, metavar="SCENE",
+                     help="a test photo's scene folder (image, calib.npy, totem_masks/, "
+                          "totems.json): its camera, and its totems' poses from their "
+                          "masks and the key")
+    cam.add_argument("--calib", default=None, help="calib.npy from `totems calib`")
+    cam.add_argument("--fov", type=positive(float), default=None, metavar="DEG",
+                     help="horizontal field of view in degrees (no calib.npy)")
+    cam.add_argument("--size", type=size, default=None, help="the photo's WxH in pixels")
+    key = v.add_argument_group("the key (--key, or --radius and --ior; --photo: its own)")
+    key.add_argument("--key", default=None, help="totems.json: radius (m) and ior")
+    key.add_argument("--radius", type=positive(float), default=None, metavar="M",
+                     help="the totems' radius in metres")
+    key.add_argument("--ior", type=ior, default=None, metavar="N",
+                     help="their index of refraction")
+    v.add_argument("--totem", type=numbers(3, "U,V,DIST: a pixel and metres"),
+                   action="append", default=None, metavar="U,V,DIST",
+                   help="a totem where it will stand, once per totem: its centre's pixel "
+                        "in the photo and its distance from the camera in metres")
+    subject = v.add_mutually_exclusive_group(required=True)
+    subject.add_argument("--subject-distance", type=float, default=None, metavar="M",
+                         help="the subject, as a plane facing the camera this far away "
+                              "(metres, along the optical axis)")
+    subject.add_argument("--subject-plane", default=None, metavar="X,Y,Z,NX,NY,NZ",
+                         type=numbers(6, "X,Y,Z,NX,NY,NZ: a point (m) and a normal"),
+                         help="the subject's plane: a point and a normal, camera frame "
+                              "(x right, y down, z forward; metres)")
+    where = v.add_mutually_exclusive_group()
+    where.add_argument("--subject-region", type=region, default=None, metavar="X,Y,W,H",
+                       help="the subject's box in the photo, pixels (default: the frame "
+                            "above the totems)")
+    where.add_argument("--subject-mask", default=None, metavar="PNG",
+                       help="the subject's region as a mask the photo's size (white)")
+    v.add_argument("--out", default=None,
+                   help="output folder (default plan-out; with --photo "
+                        "SCENE/totems-out/plan)")
+    v.add_argument("--no-move", action="store_true",
+                   help="predict only: do not look for a move that widens the reach")
 
 
 def tls(args) -> tuple[str | None, str | None, str | None]:

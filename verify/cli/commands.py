@@ -221,6 +221,80 @@ def cmd_crosscheck(args) -> dict:
     return {**summary, "crosscheck": str(out / "crosscheck")}
 
 
+def _plan_camera_and_totems(args):
+    """(K, size, centres (n, 3) m, radius (n,), ior (n,), the photo or None) from a
+    test photo's folder, or from a camera, a key and totems' pixels and distances."""
+    import numpy as np
+
+    from scenes import camera, folder
+    from scenes.errors import BadInput
+
+    if args.photo:
+        from inverse.pose.pose import initial_pose
+
+        if args.totem or args.calib or args.fov or args.size:
+            raise BadInput("--photo gives the camera and the totems: drop --totem, --calib, "
+                           "--fov and --size")
+        default = (args.radius, args.ior) if args.radius and args.ior else None
+        scene = folder.read_scene(args.photo, default_key=default)
+        radius, ior = scene.radius, scene.ior
+        if args.key:
+            radius, ior = folder.read_key(args.key, scene.n_totems)
+        elif default:
+            radius, ior = np.full(scene.n_totems, args.radius), np.full(scene.n_totems,
+                                                                        args.ior)
+        centers = initial_pose(scene.masks, scene.K, radius)
+        return scene.K, scene.size, centers, radius, ior, scene.image
+    if not args.totem:
+        raise BadInput("say where the totems will stand: --totem U,V,DIST once per totem, "
+                       "or --photo SCENE")
+    if args.size is None or (args.calib is None) == (args.fov is None):
+        raise BadInput("give the camera: --calib calib.npy or --fov DEG, with --size WxH")
+    K = folder.read_calib(args.calib)["mtx"] if args.calib else \
+        camera.intrinsics(*args.size, args.fov)
+    n = len(args.totem)
+    if args.key:
+        radius, ior = folder.read_key(args.key, n, what="totems given (--totem)")
+    elif args.radius and args.ior:
+        radius, ior = np.full(n, args.radius), np.full(n, args.ior)
+    else:
+        raise BadInput("give the key: --key totems.json, or --radius M and --ior N")
+    uvd = np.asarray(args.totem, np.float64)
+    if np.any(uvd[:, 2] <= 0):
+        raise BadInput("a totem's distance (the third number of --totem) must be positive: "
+                       "it stands in front of the camera")
+    centers = camera.pixel_rays(K, uvd[:, 0], uvd[:, 1]) * uvd[:, 2:3]
+    return K, args.size, centers, radius, ior, None
+
+
+def cmd_plan(args) -> dict:
+    from scenes.folder import read_mask
+    from scenes.plan.files import summary_line, write_plan
+    from scenes.plan.plan import make_plan, region_box
+    from scenes.plan.predict import fronto_plane, subject_plane
+    from scenes.working import block_mean
+
+    t0 = time.perf_counter()
+    K, size, centers, radius, ior, photo = _plan_camera_and_totems(args)
+    plane = fronto_plane(args.subject_distance) if args.subject_plane is None else \
+        subject_plane(args.subject_plane[:3], args.subject_plane[3:])
+    region, how = None, "above the totems"
+    if args.subject_region:
+        region, how = region_box(args.subject_region, size), "box"
+    elif args.subject_mask:
+        region, how = read_mask(args.subject_mask, what="subject mask"), "mask"
+    plan = make_plan(K, size, centers, radius, ior, plane, region=region, region_from=how,
+                     suggest=not args.no_move)
+    background = None if photo is None else (
+        photo if plan.scale == 1 else block_mean(photo, plan.scale))
+    out = Path(args.out) if args.out else (
+        Path(args.photo) / "totems-out" / "plan" if args.photo else Path("plan-out"))
+    seconds = round(time.perf_counter() - t0, 2)
+    write_plan(plan, out, background=background, extra={"seconds": seconds})
+    return {"plan": str(out), **plan.to_json(), "summary": summary_line(plan),
+            "seconds": seconds}
+
+
 def _print_summary(verb: str, summary: dict) -> None:
     if "verdict" in summary:
         m = summary.get("metrics", {})
@@ -240,6 +314,8 @@ def _print_summary(verb: str, summary: dict) -> None:
               + ("" if summary.get("judged_fraction") is None else
                  f", judged {100 * summary['judged_fraction']:.0f}%")
               + (f"; {extras}" if extras else "") + f"; wrote {summary['verify']}")
+    elif verb == "plan":
+        print(f"plan: {summary['summary']}; wrote {summary['plan']}")
     elif verb == "masks":
         how = "proposed" if summary["proposed"] else "as drawn"
         print(f"masks: {summary['n']} totems ({how}); check them in {summary['check']}")
@@ -293,6 +369,9 @@ def build_parser() -> argparse.ArgumentParser:
     _scene_verbs(verb, sub)
     _check_verbs(verb)
     _photo_verbs(verb)
+    v = verb("plan", cmd_plan, "before the shot: the reach a placement of totems predicts "
+             "over the subject (a plane), its share, and the move that widens it most")
+    arguments.plan(v)
     return p
 
 

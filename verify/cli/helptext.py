@@ -31,6 +31,8 @@ EXAMPLES = {
               "scenes/IMG_0001",
     "masks": "totems masks scenes/IMG_0001 --hint 212,388 --hint 401,379",
     "crosscheck": "totems crosscheck scenes/IMG_0001 --nerf logs/IMG_0001",
+    "plan": "totems plan --fov 60 --size 640x480 --radius 0.05 --ior 1.5 "
+            "--totem 120,400,2 --totem 520,400,2 --subject-distance 4",
 }
 """One command line per parser, keyed by its name (``make`` is ``scene make``)."""
 
