@@ -75,7 +75,7 @@ from scenes.errors import BadInput
 
 __all__ = ["NOTHING", "TOTEM_ID_BASE", "KINDS", "sampler_type", "totem_id",
            "texture_image", "envmap_image", "scene_dict", "load_scene", "render",
-           "shape_ids", "depth_map", "totem_masks"]
+           "shape_ids", "hit_ids", "depth_map", "totem_masks"]
 
 NOTHING = -1
 TOTEM_ID_BASE = 1000
@@ -352,17 +352,24 @@ def shape_ids(desc: dict, *, totems: bool = True, exclude_ids=()) -> np.ndarray:
     d, ids = scene_dict(desc, spp=1, totems=totems, exclude_ids=exclude_ids)
     scene = mi.load_dict(d)
     _, si = _centre_hits(scene, W, H)
-    hit = np.array(dr.reinterpret_array(mi.UInt32, si.shape)).astype(np.int64)
-    valid = np.array(si.is_valid())
+    return hit_ids(scene, ids, si).astype(np.int32).reshape(H, W)
+
+
+def hit_ids(scene, ids: dict, si) -> np.ndarray:
+    """Our id (module docstring) of the shape each intersection ``si`` of ``scene`` met,
+    :data:`NOTHING` where it met none, (m,) int64; ``ids`` the map of
+    :func:`scene_dict`."""
+    dr, mi = backend.modules()
+    hit = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape)).astype(np.int64)
     lookup = {}
     for shape in scene.shapes():
-        reg = int(np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))[0])
+        reg = int(np.asarray(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))[0])
         lookup[reg] = ids.get(shape.id(), NOTHING)
-    table = np.full(max(lookup, default=0) + 2, NOTHING, np.int32)
+    table = np.full(max(lookup, default=0) + 2, NOTHING, np.int64)
     for reg, i in lookup.items():
         table[reg] = i
-    out = np.where(valid, table[np.clip(hit, 0, len(table) - 1)], NOTHING)
-    return out.astype(np.int32).reshape(H, W)
+    return np.where(np.asarray(si.is_valid(), bool),
+                    table[np.clip(hit, 0, len(table) - 1)], NOTHING)
 
 
 def depth_map(desc: dict, *, totems: bool = False) -> np.ndarray:

@@ -23,7 +23,8 @@ from scenes import backend, camera, folder
 from scenes.errors import BadInput
 from scenes.reach import COS_EVIDENCE, SUPERSAMPLE, Reach, reach_map
 from scenes.refraction import MIN_TRANSMITTANCE, exit_rays
-from scenes.synthetic.render import NOTHING, TOTEM_ID_BASE, load_scene, scene_dict, totem_id
+from scenes.synthetic.render import (NOTHING, TOTEM_ID_BASE, hit_ids, load_scene, scene_dict,
+                                     totem_id)
 
 __all__ = ["TotemHits", "tracer", "camera_points", "totem_hits", "truth_reach", "write_reach"]
 
@@ -67,16 +68,9 @@ def tracer(desc: dict, *, totems: bool = True):
     ``trace`` returns (Y (m, 3) metres, NaN where the ray leaves the scene; normal (m, 3)
     unit, NaN there; ids (m,) int as :func:`scenes.synthetic.render.shape_ids` gives them).
     """
-    dr, mi = backend.modules()
+    mi = backend.modules()[1]
     sd, ids = scene_dict(desc, spp=1, totems=totems)
     scene = load_scene(sd)
-    lookup = {}
-    for shape in scene.shapes():
-        reg = int(np.asarray(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))[0])
-        lookup[reg] = ids.get(shape.id(), NOTHING)
-    table = np.full(max(lookup, default=0) + 2, NOTHING, np.int64)
-    for reg, i in lookup.items():
-        table[reg] = i
 
     def trace(o, d):
         o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
@@ -87,8 +81,7 @@ def tracer(desc: dict, *, totems: bool = True):
         t = np.asarray(si.t, np.float64)
         Y = np.where(valid[:, None], o + t[:, None] * d, np.nan)
         N = np.where(valid[:, None], np.asarray(si.n, np.float64).T.reshape(-1, 3), np.nan)
-        hit = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape)).astype(np.int64)
-        return Y, N, np.where(valid, table[np.clip(hit, 0, len(table) - 1)], NOTHING)
+        return Y, N, hit_ids(scene, ids, si)
 
     return trace
 
