@@ -126,19 +126,11 @@ def check_rows(rows: list[dict], set_name: str = "calibration") -> None:
         if r["statistic"] is None:
             raise BadInput(f"{r['name']}: report.json has no statistic; verify again "
                            f"with this code (totems bench --reverify)")
-        if r["seed"] not in _seeds(set_name, r["preset"]):
-            other = [s for s in sets.SEEDS if r["seed"] in _seeds(s, r["preset"])]
+        if r["seed"] not in sets.seeds_of(set_name, r["preset"]):
+            other = sets.owner(r["preset"], r["seed"])
             raise BadInput(f"{r['name']}: {r['preset']} seed {r['seed']} belongs to "
-                           f"{other[0] if other else 'no set'}, not the {set_name} set; "
+                           f"{other or 'no set'}, not the {set_name} set; "
                            f"a calibration never sees another set's seeds")
-
-
-def _seeds(set_name: str, preset: str):
-    """The set's seeds of a preset; a Cycles scene's preset (``cycles-<kind>``) takes
-    the set's Cycles seeds (``sets.CYCLES``)."""
-    if preset.startswith("cycles-"):
-        return sets.CYCLES.get(set_name, ((),))[0]
-    return sets.SEEDS[set_name].get(preset, ())
 
 
 def _commit() -> str:
@@ -226,6 +218,7 @@ def main(argv=None) -> int:
               f"calls inconsistent: {', '.join(left_out)}")
     source = {"set": args.set, "photos": len(rows), "unverifiable_left_out": len(left_out),
               "seeds": f"{seeds[0]}-{seeds[-1]}",
+              "scenes": sorted({f"{r['preset']}:{r['seed']}" for r in rows}),
               "presets": sorted({r["preset"] for r in rows}),
               "channels": sorted({r["channel"] for r in rows}),
               "totems": sorted({r["totems"] for r in rows}),

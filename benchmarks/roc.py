@@ -30,7 +30,8 @@ the shipped one: p-value below its alpha), prints:
 ``--thresholds RANGE=T,UNSEEN=T,ABSENT=T`` judges the runs at other thresholds than
 those they were verified at, from each run's per-metric scores (:func:`rejudge`; the
 thresholds move no score, so no verify is needed). ``--plot`` draws the ROC curves per
-kind. Seconds.
+kind. Refuses (exit 2) a bench holding photos of the set the calibration was made from
+(its ``source.set``): a figure is never reported on what set the line. Seconds.
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import sets  # noqa: E402
 
 from verify.verdict.calibration import clopper_pearson, load, statistic_of
 from verify.verdict.verdict import MAX_HOLDOUT, MIN_JUDGED, THRESHOLDS
@@ -62,6 +67,26 @@ def load_runs(bench_dirs) -> list[dict]:
             rows.append({**r, "statistic": t,
                          "channel": r["name"].partition("+")[2] or "pristine"})
     return rows
+
+
+def calibration_photos(rows: list[dict], cal) -> list[str]:
+    """The names of the rows whose scene (``truth/scene.json``: preset and seed) is of
+    the set the calibration ``cal`` was made from: figures must not be reported on what
+    set the line."""
+    set_name = cal.source.get("set")
+    if set_name not in sets.SEEDS:
+        return []
+    out = []
+    for r in rows:
+        sj = Path(r["scene"]) / "truth" / "scene.json"
+        if not sj.is_file():
+            continue
+        desc = json.loads(sj.read_text())
+        preset, seed = desc.get("preset"), desc.get("seed")
+        if preset is not None and seed is not None \
+                and int(seed) in sets.seeds_of(set_name, preset):
+            out.append(r["name"])
+    return out
 
 
 def rejudge(rows: list[dict], thresholds: dict) -> list[dict]:
@@ -313,9 +338,16 @@ def main(argv=None) -> int:
                         "those the runs were verified at")
     args = p.parse_args(argv)
     rows = load_runs(args.bench)
+    cal = load(args.calibration)
+    seen = calibration_photos(rows, cal)
+    if seen:
+        print(f"roc: {len(seen)} photos ({', '.join(seen[:3])}{', ...' if len(seen) > 3 else ''})"
+              f" are of the {cal.source['set']} set, whose seeds set the verdict's line: "
+              f"figures are never reported on them; bench another set", file=sys.stderr)
+        return 2
     if args.thresholds:
         rows = rejudge(rows, parse_thresholds(args.thresholds))
-    print(tables(rows, load(args.calibration)))
+    print(tables(rows, cal))
     if args.plot:
         plot(rows, args.plot)
         print(f"wrote {args.plot}")

@@ -31,7 +31,8 @@ from scenes.synthetic.presets import PRESETS
 from scenes.tamper.tamper import KINDS, TOTEM_KINDS
 
 __all__ = ["CHANNELS", "SEEDS", "CYCLES", "CYCLES_CHANNELS", "RESERVED", "Recipe", "RECIPES",
-           "Photo", "SETS", "SCENE_KINDS", "TOTEM_EDITS", "check_disjoint", "photos"]
+           "Photo", "SETS", "SCENE_KINDS", "TOTEM_EDITS", "check_disjoint", "seeds_of", "owner",
+           "photos"]
 
 UNTOUCHED = "none"
 SCENE_KINDS = tuple(k for k in KINDS if k not in TOTEM_KINDS)
@@ -167,6 +168,19 @@ def check_disjoint(seeds=None, reserved=None) -> None:
                 if other != group:
                     raise ValueError(f"{preset} seed {s} is in both {other!r} and "
                                      f"{group!r}: a set's seeds must be its own")
+
+
+def seeds_of(set_name: str, preset: str):
+    """The set's seeds of a preset; a Cycles scene's preset (``cycles-<kind>``) takes
+    the set's Cycles seeds (``CYCLES``)."""
+    if preset.startswith("cycles-"):
+        return CYCLES.get(set_name, ((),))[0]
+    return SEEDS[set_name].get(preset, ())
+
+
+def owner(preset: str, seed: int) -> str | None:
+    """The set a preset's seed belongs to (None: to none)."""
+    return next((s for s in SEEDS if seed in seeds_of(s, preset)), None)
 
 
 def photos(name: str) -> list[Photo]:

@@ -132,3 +132,34 @@ def test_edits_caught_by_the_share_in_the_truths_reach_and_the_reach_by_preset()
     box = next(r for r in rows if r.startswith("| box floating"))
     assert box.split(" | ")[1:4] == ["3", "0.60", "0.70"]   # photos, medians
     assert roc.by_reach([{"kind": "none", "metrics": {}}]) == []
+
+
+def test_roc_refuses_photos_of_the_set_that_set_the_line(tmp_path, capsys):
+    """A bench holding a calibration seed's photo is refused in one line (exit 2); the
+    same bench of another set's seeds is reported."""
+    import json
+
+    from verify.verdict.calibration import fit_tail
+
+    cal = fit_tail(np.linspace(0.1, 1.0, 40))
+    cal.source["set"] = "calibration"
+    cal_path = tmp_path / "cal.json"
+    cal_path.write_text(json.dumps(cal.to_json()))
+
+    def bench(seed, where):
+        scene = tmp_path / where / f"box-{seed}"
+        (scene / "truth").mkdir(parents=True)
+        (scene / "truth" / "scene.json").write_text(json.dumps({"preset": "box", "seed": seed}))
+        runs = [{"name": f"box-{seed}", "scene": str(scene), "mode": "joint", "status": "ok",
+                 "kind": "none", "preset": "box", "placement": "floating",
+                 "verdict": "consistent", "score": 0.5, "threshold": 1.0, "statistic": 0.5,
+                 "metrics": {}}]
+        out = tmp_path / where / "bench"
+        out.mkdir()
+        (out / "bench.json").write_text(json.dumps({"runs": runs}))
+        return str(out)
+
+    assert roc.main([bench(12, "cal"), "--calibration", str(cal_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "calibration set" in err and "box-12" in err
+    assert roc.main([bench(31, "dev"), "--calibration", str(cal_path)]) == 0
