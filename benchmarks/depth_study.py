@@ -1,10 +1,10 @@
 """How near the totems put each surface: candidate depth maps against the true depth
 (issue 60, item 2).
 
-    python benchmarks/depth_study.py CHECKED... [--out CSV]
+    python benchmarks/depth_study.py BENCH [--out CSV] [--slices N] [--far M]
 
-For each checked synthetic scene folder (``totems check`` run, ``truth/reach.npz``
-there), every candidate depth map is read at the pixels in the truth's reach (the
+For each untouched photo of a bench (``totems bench``; its scene's ``truth/reach.npz``),
+every candidate depth map is read at the pixels in the truth's reach (the
 backdrop left out) and its median relative error ``|z - z_true| / z_true`` printed, with
 the share of those pixels it gives a depth at all, and the share within 5 %:
 
@@ -84,7 +84,7 @@ def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None) -> d
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", nargs="+", type=Path)
+    p.add_argument("bench", type=Path)
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--slices", type=int, default=64)
     p.add_argument("--far", type=float, default=None)
@@ -92,10 +92,16 @@ def main(argv=None) -> int:
     from inverse.fit.files import load_fit
     from scenes import folder
 
+    import json
+
     rows = []
-    for sd in args.scenes:
+    for run in json.loads((args.bench / "bench.json").read_text())["runs"]:
+        sd = Path(run["scene"])
+        fit_dir = args.bench / "runs" / f"{run['name']}-joint" / "fit"
+        if run.get("mode") != "joint" or run.get("kind") != "none" or not fit_dir.is_dir():
+            continue
         truth, scene = folder.read_truth(sd), folder.read_scene(sd)
-        fit = load_fit(sd / "totems-out" / "fit")
+        fit = load_fit(fit_dir)
         if truth is None or truth.reach is None or fit.rays is None:
             continue
         r = truth.reach
@@ -104,7 +110,8 @@ def main(argv=None) -> int:
         for name, zc in candidates(fit, scene, n_slices=args.slices, far=args.far).items():
             given = at & np.isfinite(zc)
             err = np.abs(zc[given] - zt[given]) / zt[given]
-            row = {"name": sd.name, "candidate": name, "given": given.sum() / max(at.sum(), 1),
+            row = {"name": sd.name, "preset": run["preset"],
+                   "placement": run.get("placement"), "candidate": name, "given": given.sum() / max(at.sum(), 1),
                    "median_rel_err": float(np.median(err)) if err.size else np.nan,
                    "within_5pc": float((err <= 0.05).mean()) if err.size else np.nan}
             rows.append(row)

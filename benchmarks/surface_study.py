@@ -1,9 +1,9 @@
 """The photo against what its totems see at each surface's depth, from several depth maps
 (issue 60, items 2 and 3): what the geometry buys the verdict.
 
-    python benchmarks/surface_study.py CHECKED... [--out CSV] [--slices N] [--far M]
+    python benchmarks/surface_study.py BENCH [--out CSV] [--slices N] [--far M]
 
-For each checked synthetic scene folder (``totems check`` run; ``truth/reach.npz``), the
+For each photo of a bench (``totems bench``; its scene's ``truth/reach.npz``), the
 fit's totem rays are swept (:func:`verify.metrics.corroborate.ray_slices`, ``N`` slices to
 ``M`` metres) and read at one depth per cell of the map: the truth's (the cell's median
 true depth: the oracle), semi-global matching's on the totems' colour agreement, or the
@@ -75,7 +75,7 @@ def sgm_depth(sc, par, min_parallax):
     return np.where(ok.any(axis=0), np.asarray(sc.z)[k], np.nan)
 
 
-def study(sd: Path, n_slices: int, far: float) -> dict:
+def study(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
     from inverse.fit.files import load_fit
     from inverse.grid import FrustumFrame, cells_to_pixels
     from scenes import folder
@@ -85,7 +85,7 @@ def study(sd: Path, n_slices: int, far: float) -> dict:
     from verify.verdict.verdict import judging_grid
 
     truth, scene = folder.read_truth(sd), folder.read_scene(sd)
-    fit = load_fit(sd / "totems-out" / "fit")
+    fit = load_fit(fit_dir)
     H, W = scene.image.shape[:2]
     frame = FrustumFrame.from_dict(fit.grid)
     frame = dataclasses.replace(frame, far=min(frame.far, far))
@@ -151,18 +151,24 @@ def auc(neg, pos) -> float:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", nargs="+", type=Path)
+    p.add_argument("bench", type=Path)
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--slices", type=int, default=128)
     p.add_argument("--far", type=float, default=100.0)
     args = p.parse_args(argv)
     rows = []
-    for sd in args.scenes:
-        if not (sd / "totems-out" / "fit").is_dir() or not (sd / "truth" / "reach.npz").is_file():
+    runs = json.loads((args.bench / "bench.json").read_text())["runs"]
+    for run in runs:
+        if run.get("mode") != "joint" or run.get("status") != "ok":
+            continue
+        sd = Path(run["scene"])
+        fit_dir = args.bench / "runs" / f"{run.get('fit_from') or run['name']}-joint" / "fit"
+        if not fit_dir.is_dir() or not (sd / "truth" / "reach.npz").is_file():
             continue
         tj = sd / "truth" / "tamper.json"
         kind = json.loads(tj.read_text())["kind"] if tj.is_file() else "none"
-        row = {"name": sd.name, "kind": kind, **study(sd, args.slices, args.far)}
+        row = {"name": sd.name, "kind": kind, "preset": run.get("preset"),
+               **study(sd, fit_dir, args.slices, args.far)}
         rows.append(row)
         print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                        for k, v in row.items()), flush=True)
