@@ -182,7 +182,7 @@ def _in_footprints(X, Y, o, d, normal, spacing, k: int = 8) -> np.ndarray:
     dist, idx = dist.reshape(len(X), k), idx.reshape(len(X), k)
     found = np.zeros(len(X), bool)
     for c in range(k):
-        ok = np.isfinite(dist[:, c])
+        ok = np.isfinite(dist[:, c]) & ~found        # a point already inside is done
         i = idx[ok, c]
         delta = X[ok] - Y[i]
         a = (delta * along[i]).sum(1) * cos[i] / r[i]
