@@ -161,8 +161,8 @@ def highlights(image, masks, *, level: float = HIGHLIGHT,
 
 
 def others_along(rays: TotemRays, slices: SliceColours, frame: FrustumFrame) -> Along:
-    """What each ray meets at each slice of ``slices`` (over ``frame``'s map): its own
-    totem's colour there and the other totems' (:class:`Along`).
+    """What each ray meets at each slice of ``slices`` (over ``frame``'s map; made of
+    these rays): its own totem's colour there and the other totems' (:class:`Along`).
 
     Each ray's line (not only its part beyond the glass's surface: the slices are the
     totems' lines too) is cut with each depth plane ``z_k`` in front of its exit point;
@@ -176,7 +176,7 @@ def others_along(rays: TotemRays, slices: SliceColours, frame: FrustumFrame) -> 
     spread = np.full((m, nk), np.nan, np.float32)
     count = np.zeros((m, nk), np.int16)
     idx = np.arange(m)
-    mine = np.minimum(rays.totem, n_tot - 1)
+    mine = rays.totem                        # the slices were made of these rays
     for k, z in enumerate(np.asarray(slices.z, np.float64)):
         s, t = frame.pixel_to_st(au + bu / z, av + bv / z)
         col, row = np.floor(s * ns).astype(np.int64), np.floor(t * nt).astype(np.int64)
@@ -185,7 +185,7 @@ def others_along(rays: TotemRays, slices: SliceColours, frame: FrustumFrame) -> 
         col, row = np.clip(col, 0, ns - 1), np.clip(row, 0, nt - 1)
         mu = slices.colour[:, k, row, col]                     # (n_tot, m, 3)
         land = slices.land[:, k, row, col] & ok[None]
-        self_ = land[mine, idx] & (rays.totem < n_tot)
+        self_ = land[mine, idx]
         own[self_, k] = mu[mine[self_], idx[self_]]
         land[mine, idx] = False
         n = land.sum(axis=0)
