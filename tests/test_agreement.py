@@ -93,3 +93,10 @@ def test_fewer_than_three_totems_are_not_checked():
     out = agreement.totem_agreement(rays, np.array([[0, 0, 1.0], [0.2, 0, 1.0]]), 0.05,
                                     1.5, K, None, np.zeros((120, 160, 3)), masks)
     assert np.isnan(out.score).all() and np.isnan(out.lead).all()
+
+
+def test_two_totems_retouched_alike_both_lead_and_totems_all_in_discord_none():
+    lead = agreement.leads([0.2, 1.8, 1.7, 0.1])
+    assert lead[1] > 1.0 and lead[2] > 1.0 and lead[0] < 0 and lead[3] < 0
+    assert np.all(np.abs(agreement.leads([1.5, 1.6, 1.4])) < 0.2)
+    assert np.isnan(agreement.leads([1.0, np.nan, np.nan])).all()

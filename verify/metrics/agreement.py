@@ -31,8 +31,9 @@ whose whole view disagrees, one that alone sees an object close to it, is told b
 region standing out of its own surround); where rays are missing the Gaussian counts them
 as agreeing, up to ``COVER`` of the disc (a thin band of discord at the edge of what the
 others predict weighs as the band it is). A totem's ``score`` is its worst region's
-contrast, and its ``lead`` how far that stands above every other totem's score: a photo
-whose totems all disagree somewhere leads with none. The verdict names a totem whose lead
+contrast, and its ``lead`` how far that stands above the other totems' (their median,
+so that two totems retouched alike do not hide each other): a photo whose totems all
+disagree somewhere leads with none. The verdict names a totem whose lead
 is over :data:`verify.verdict.verdict.TOTEM_LEAD`.
 
 Limits (measured on the development set, docs/decisions/verify-metrics.md): a retouch that
@@ -60,7 +61,7 @@ from verify.metrics.corroborate import N_SLICES, SIGMA_CELLS, map_res
 __all__ = ["COS_AGREEMENT", "HIGHLIGHT", "HIGHLIGHT_GROW_PX", "MIN_OTHERS", "OTHERS_AGREE",
            "FLOOR", "DISCORD_CAP", "SIGMA_DISC", "SURROUND_DISC", "COVER", "Along",
            "Agreement", "ray_pixels", "highlights", "others_along", "ray_discord",
-           "disc_contrast", "totem_agreement"]
+           "disc_contrast", "leads", "totem_agreement"]
 
 COS_AGREEMENT = 0.5
 """Rays that entered their sphere at an incidence cosine below this are not evidence
@@ -118,8 +119,8 @@ class Agreement:
     ----------
     score : (n,) each totem's worst region's contrast (discord units: hue difference
         over the others' spread), NaN where no region of it is predicted.
-    lead : (n,) ``score`` less the largest other totem's score (NaN where either is
-        unknown, or with fewer than two scored totems).
+    lead : (n,) ``score`` less the median of the other totems' scores (:func:`leads`;
+        NaN where either is unknown, or with fewer than two scored totems).
     centre : (n, 2) the worst region's centre, pixel (u, v) of the photo (NaN where none).
     radius : (n,) the region's radius in pixels (twice its Gaussian's sigma).
     judged : (n,) the share of each totem's mask whose pixel has a prediction.
@@ -314,9 +315,20 @@ def totem_agreement(rays: TotemRays, centers, radius, ior, K, frame: FrustumFram
             out.score[j] = float(c[a, b])
             out.centre[j] = (float(b), float(a))
             out.contrast[masks[j]] = c[masks[j]]
-    scored = np.isfinite(out.score)
-    if scored.sum() >= 2:
-        for j in np.nonzero(scored)[0]:
-            out.lead[j] = out.score[j] - np.max(np.delete(out.score, j)[
-                np.isfinite(np.delete(out.score, j))])
+    out.lead[:] = leads(out.score)
+    return out
+
+
+def leads(score) -> np.ndarray:
+    """Each totem's ``score`` (n,) less the median of the other totems' scores (NaN
+    where its own or all others' are NaN): how far its worst region stands above the
+    rest. The median, not the largest, so that two totems retouched alike do not hide
+    each other."""
+    score = np.asarray(score, np.float64)
+    out = np.full(score.shape, np.nan)
+    for j in np.nonzero(np.isfinite(score))[0]:
+        others = np.delete(score, j)
+        others = others[np.isfinite(others)]
+        if others.size:
+            out[j] = score[j] - np.median(others)
     return out

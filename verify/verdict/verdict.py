@@ -125,13 +125,14 @@ unverifiable where the totems do not predict each other')."""
 
 
 TOTEM_LEAD = 1.0
-"""A totem whose worst region disagrees with the other totems this much more than every
-other totem's does (its ``lead``, :class:`verify.metrics.agreement.Agreement`, in discord
-units) is named, and the photo is inconsistent: its view disagrees with the others'
-there. Just above the largest lead of the development set's untouched photos (0.96, one
-outdoor scene whose totem alone sees a ball beside it; the next 0.39), so that the test
-adds no false alarm there; a test of its own, outside the calibrated statistic (see
-docs/decisions/verify-verdict.md, 'verdict: a totem that disagrees with the others')."""
+"""A totem whose worst region disagrees with the other totems this much more than theirs
+do (its ``lead`` over their median, :class:`verify.metrics.agreement.Agreement`, in
+discord units) is named, and the photo is inconsistent: its view disagrees with the
+others' there. Just above the largest lead of the development set's untouched photos
+(0.995, one outdoor scene whose totem alone sees a ball beside it; the next 0.51), so
+that the test adds no false alarm there; a test of its own, outside the calibrated
+statistic (see docs/decisions/verify-verdict.md, 'verdict: a totem that disagrees with
+the others makes the photo inconsistent, on a line of its own')."""
 
 
 @dataclass
