@@ -1,4 +1,5 @@
-"""Refraction through a glass sphere, in numpy: the twin of :mod:`inverse.sphere`.
+"""Refraction through a glass sphere, in numpy: the twin of :mod:`inverse.sphere`, and the
+way back (:func:`entry_points`: where a ray leaving the glass entered it).
 
 ``scenes`` imports nothing of ``inverse``, so what a glass sphere does to the camera's
 rays is written here again without Dr.Jit, for the code that needs it before or beside a
@@ -19,7 +20,7 @@ import numpy as np
 from scenes.camera import pixel_rays
 
 __all__ = ["MIN_TRANSMITTANCE", "ExitRays", "refract_sphere", "entry_cosine",
-           "transmittance", "exit_rays"]
+           "transmittance", "exit_rays", "entry_points"]
 
 MIN_TRANSMITTANCE = 0.05
 """Rays whose Fresnel transmittance through both surfaces is below this are dropped: the
@@ -59,6 +60,42 @@ def refract_sphere(d, P, R: float, eta: float):
     d_out = eta * d_mid - (eta * cos_t - cos_i)[:, None] * N2
     d_out /= np.linalg.norm(d_out, axis=1, keepdims=True)
     return E, d_out, valid
+
+
+def entry_points(E, d_out, P, R, eta) -> np.ndarray:
+    """Where the camera rays that leave a glass sphere at ``E`` along ``d_out`` entered
+    it: :func:`refract_sphere` run backwards (a ray's path through glass is the same
+    either way), so a ray leaving the glass can be put back on its totem pixel.
+
+    Parameters
+    ----------
+    E : (m, 3) exit points on the sphere, camera frame, metres.
+    d_out : (m, 3) unit directions the rays leave along.
+    P : (3,) or (m, 3) sphere centre(s), metres; ``R`` radius, ``eta`` = n_glass / n_air:
+        scalars or (m,), one per ray.
+
+    Returns
+    -------
+    (m, 3) entry points, metres: the camera ray through each is the pixel the ray left
+    (:func:`scenes.camera.project`). The exit point is first put on the sphere (it is
+    stored in float32).
+    """
+    E = np.asarray(E, np.float64)
+    d = np.asarray(d_out, np.float64)
+    P = np.asarray(P, np.float64)
+    R = np.asarray(R, np.float64)
+    eta = np.asarray(eta, np.float64)
+    N = E - P
+    N = N / np.linalg.norm(N, axis=-1, keepdims=True)      # outward normal at the exit
+    E = P + R[..., None] * N if R.ndim else P + R * N
+    # backwards, the ray arrives along -d_out and enters the glass at E (air to glass);
+    # the outward normal faces it, its incidence cosine that of the forward exit
+    c = np.clip((d * N).sum(-1), 0.0, 1.0)
+    r = 1.0 / eta
+    cos_t = np.sqrt(np.maximum(1.0 - r * r * (1.0 - c * c), 0.0))
+    back = -r[..., None] * d if r.ndim else -r * d
+    back = back + (r * c - cos_t)[..., None] * N
+    return E + (2.0 * R * cos_t)[..., None] * back      # the chord back to the entry
 
 
 def entry_cosine(d, P, R: float) -> np.ndarray:

@@ -3,6 +3,7 @@ photo and its copies edited outside the totems once, writes bench.json, bench.cs
 bench.md."""
 
 import csv
+import io
 import json
 import shutil
 
@@ -71,3 +72,16 @@ def test_bench_records_a_failing_scene_and_completes_the_others(tmp_path):
         assert rerun[name]["metrics"]["recon_L1"] == pytest.approx(   # recon.png: 8 bit
             runs[name]["metrics"]["recon_L1"], abs=1e-3)
     assert "verified again" in (out / "bench.md").read_text()
+
+
+def test_the_csv_carries_the_totem_check():
+    from verify.batch.bench import csv_text
+
+    run = {"name": "a", "verdict": "inconsistent", "inconsistent_reasons": ["photo", "totem"],
+           "totem_check": {"named": [0, 2], "totems": [{"lead": 1.5}, {"lead": -1.5},
+                                                       {"lead": None}]}}
+    (row,) = csv.DictReader(io.StringIO(csv_text([run])))
+    assert row["inconsistent_reasons"] == "photo;totem" and row["totems_named"] == "0;2"
+    assert float(row["totem_lead"]) == 1.5
+    (bare,) = csv.DictReader(io.StringIO(csv_text([{"name": "b"}])))
+    assert bare["totems_named"] == "" and bare["totem_lead"] == ""

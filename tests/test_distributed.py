@@ -66,6 +66,10 @@ def test_names_stay_unique_and_lines_say_what_happened(tmp_path):
                              "(resumed)"
     assert photo_line({"name": "p", "status": "failed", "error": "bad key"}) == \
         "p: could not be checked: bad key"
+    named = dict(ok, fit_from=None, resumed=False,
+                 totem_check={"named": [2], "totems": []})
+    assert photo_line(named) == ("p: inconsistent, score 2.50 of 1.00, p = 0.001; totem 3 "
+                                 "from the left disagrees with the other totems")
 
 
 def test_a_missing_folder_is_refused_before_anything_runs(tmp_path):

@@ -16,7 +16,8 @@ from verify_cases import (CENTERS, IOR, K, RADIUS, SQUARE, H, W, box_mask, make_
 FIELDS = {"verdict", "score", "threshold", "protected_fraction", "totems", "metrics",
           "timing_s", "versions", "scores", "drivers", "key_fingerprint", "region",
           "statistic", "p_value", "line_p_value", "skipped", "working_scale",
-          "judged_fraction", "evidence", "tone", "holdout", "unverifiable_reason"}
+          "judged_fraction", "evidence", "tone", "holdout", "unverifiable_reason",
+          "inconsistent_reasons", "totem_check"}
 
 
 def test_silhouette_of_a_sphere_on_the_axis_is_a_disc():
@@ -57,7 +58,8 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
     data = json.loads(path.read_text())
     assert set(data) == FIELDS
     assert data["working_scale"] == 1                  # a 320 x 240 photo, as it is
-    assert data["verdict"] == "inconsistent"
+    assert data["verdict"] == "inconsistent" and data["inconsistent_reasons"] == ["photo"]
+    assert data["totem_check"] is None                 # a fit without its totem rays
     assert set(data["metrics"]) == {"patch_ap_L1", "patch_ap_SSIM", "patch_ap_CHROMA",
                                     "patch_ap_RANGE", "patch_ap_CORROB",
                                     "patch_ap_UNSEEN", "patch_ap_ABSENT", "recon_L1",

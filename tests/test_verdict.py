@@ -241,3 +241,41 @@ def test_a_patch_judged_too_thinly_judges_nothing():
     out = verdict.judgeable(judged, g)
     assert not out[0:3].any() and not out[80:].any()
     assert out[40:45, 16:24].all() and out.sum() == 40
+
+
+def test_a_totem_over_the_line_is_named_and_the_photo_inconsistent_with_its_reason():
+    # the totems checked against each other (verify.metrics.agreement): a test of its
+    # own, outside the statistic; unverifiable still wins when the totems do not
+    # predict each other
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    calm, cover = np.full((10, 10), 0.01), np.ones((10, 10))
+    lead = np.array([-1.2, verdict.TOTEM_LEAD + 0.2, np.nan])
+    d = verdict.decide({"UNSEEN": calm}, cover, g, calibration=None, totem_lead=lead)
+    assert d.verdict == "inconsistent" and d.inconsistent_reasons == ["totem"]
+    assert d.totems_named == [1] and d.reason is None
+    plain = verdict.decide({"UNSEEN": calm}, cover, g, calibration=None)
+    assert plain.verdict == "consistent" and plain.inconsistent_reasons == []
+    assert d.score == plain.score and d.statistic == plain.statistic
+    below = verdict.decide({"UNSEEN": calm}, cover, g, calibration=None,
+                           totem_lead=lead - 0.4)
+    assert below.verdict == "consistent" and below.totems_named == []
+    loud = np.full((10, 10), 1.0)
+    both = verdict.decide({"UNSEEN": loud}, cover, g, calibration=None, totem_lead=lead)
+    assert both.inconsistent_reasons == ["photo", "totem"]
+    held = verdict.decide({"UNSEEN": calm}, cover, g, calibration=None, totem_lead=lead,
+                          holdout=verdict.MAX_HOLDOUT + 0.1)
+    assert held.verdict == "unverifiable" and held.reason == "holdout"
+    assert held.inconsistent_reasons == [] and held.totems_named == [1]
+    assert verdict.name_totems(None) == [] and verdict.name_totems([np.nan]) == []
+
+
+def test_a_photo_no_patch_judges_is_inconsistent_when_a_totem_is_named():
+    g = patches.patch_grid(make_scene().masks.any(axis=0), grid=10)
+    none, cover = np.full((10, 10), np.nan), np.zeros((10, 10))
+    lead = np.array([2.0 * verdict.TOTEM_LEAD, -1.0, -1.0])
+    d = verdict.decide({"UNSEEN": none}, cover, g, calibration=None, judged_fraction=0.0,
+                       totem_lead=lead)
+    assert d.verdict == "inconsistent" and d.inconsistent_reasons == ["totem"]
+    quiet = verdict.decide({"UNSEEN": none}, cover, g, calibration=None,
+                           judged_fraction=0.0, totem_lead=-lead)
+    assert quiet.verdict == "unverifiable" and quiet.reason == "judged"

@@ -308,6 +308,7 @@ def markdown(bench: dict) -> str:
 CSV_FIELDS = ["name", "preset", "placement", "kind", "n_totems", "mode", "status", "verdict",
               "score", "threshold", *(f"score_{m}" for m in THRESHOLDS), "recon_L1", "pose_L1",
               "judged_fraction", "manip_judged", "holdout_L1", "unverifiable_reason",
+              "inconsistent_reasons", "totems_named", "totem_lead",
               *(f"patch_ap_{m}" for m in METRICS), "wall_s", "fit_from", "error",
               *(m for m in TRUTH_METRICS if m not in ("recon_L1", "pose_L1"))]
 
@@ -319,8 +320,19 @@ def csv_text(runs: list[dict]) -> str:
     for r in runs:
         scores = {f"score_{m}": v.get("score") for m, v in (r.get("scores") or {}).items()}
         held = {"holdout_L1": (r.get("holdout") or {}).get("L1")}
-        w.writerow({**r, **(r.get("metrics") or {}), **scores, **held})
+        w.writerow({**r, **(r.get("metrics") or {}), **scores, **held, **_totem_columns(r)})
     return buf.getvalue()
+
+
+def _totem_columns(run: dict) -> dict:
+    """bench.csv's columns of the totem check: ``inconsistent_reasons`` and
+    ``totems_named`` joined by ";" (totem indices, 0 the leftmost), ``totem_lead`` the
+    largest lead (empty when the check did not run)."""
+    check = run.get("totem_check") or {}
+    leads = [t["lead"] for t in check.get("totems") or [] if t.get("lead") is not None]
+    return {"inconsistent_reasons": ";".join(run.get("inconsistent_reasons") or []),
+            "totems_named": ";".join(str(j) for j in check.get("named") or []),
+            "totem_lead": max(leads) if leads else None}
 
 
 def write_outputs(bench: dict, out: Path) -> None:

@@ -65,8 +65,12 @@ def photo_line(record: dict) -> str:
     if record["status"] != "ok":
         return f"{name}: could not be checked: {record.get('error')}"
     p = record.get("p_value")
+    named = (record.get("totem_check") or {}).get("named") or []
     return (f"{name}: {record['verdict']}, score {record['score']:.2f} of "
             f"{record['threshold']:.2f}" + ("" if p is None else f", p = {p:.2g}")
+            + ("" if not named else "; {} from the left disagree{} with the other totems"
+               .format(" and ".join(f"totem {j + 1}" for j in named),
+                       "s" * (len(named) == 1)))
             + (f"; fit of {record['fit_from']}" if record.get("fit_from") else "")
             + (" (resumed)" if record.get("resumed") else ""))
 

@@ -308,6 +308,10 @@ def _print_summary(verb: str, summary: dict) -> None:
         why = "" if summary.get("unverifiable_reason") != "holdout" else (
             " (the totems do not predict each other: holdout {L1:.3f} > {max})"
             .format(**summary["holdout"]))
+        named = (summary.get("totem_check") or {}).get("named") or []
+        if named and summary["verdict"] == "inconsistent":
+            why += " ({} from the left disagree{} with the other totems)".format(
+                " and ".join(f"totem {j + 1}" for j in named), "s" * (len(named) == 1))
         print(f"{summary['verdict']}{why}: {odds}score {summary['score']:.2f} of "
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"

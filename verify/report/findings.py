@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from verify.metrics import evidence, patches
+from verify.metrics import agreement, evidence, patches
 from verify.verdict import verdict as verdict_mod
 
 __all__ = ["Report"]
@@ -36,7 +36,9 @@ class Report:
     leave-one-totem-out error the verdict tests (:data:`verify.verdict.verdict.MAX_HOLDOUT`;
     None for a fit without it). ``judging`` the verdict's patch grid over the whole photo
     (:func:`verify.verdict.verdict.judging_grid`; the drivers' ``row`` and ``col`` index
-    it), ``grid`` the heatmaps' above the totems.
+    it), ``grid`` the heatmaps' above the totems. ``agreement`` the totems checked
+    against each other (:class:`verify.metrics.agreement.Agreement`; None for a fit
+    without totem rays): report.json's ``totem_check``.
     """
 
     verdict: str
@@ -67,6 +69,7 @@ class Report:
     tone: dict | None = None
     judging: patches.PatchGrid | None = None
     holdout: float | None = None
+    agreement: agreement.Agreement | None = None
 
     @property
     def drivers(self) -> list:
@@ -79,8 +82,9 @@ class Report:
         :mod:`verify.verdict.calibration`), ``drivers``, ``key_fingerprint``, ``region``
         (the protected region's shape), ``working_scale`` (:mod:`scenes.working`),
         ``judged_fraction`` and ``evidence`` (:mod:`verify.metrics.evidence`), ``tone``
-        (:mod:`verify.metrics.tone`), ``holdout`` and ``unverifiable_reason``
-        (:func:`verify.verdict.verdict.decide`) and a
+        (:mod:`verify.metrics.tone`), ``holdout``, ``unverifiable_reason`` and
+        ``inconsistent_reasons`` (:func:`verify.verdict.verdict.decide`), ``totem_check``
+        (:meth:`totem_check`) and a
         ``metrics.patch_ap_<name>`` for every heatmap (docs/contract.md)."""
         return {
             "verdict": self.verdict,
@@ -111,10 +115,35 @@ class Report:
             "holdout": {"L1": _num(self.holdout),
                         "max": float(verdict_mod.MAX_HOLDOUT)},
             "unverifiable_reason": self.decision.reason,
+            "inconsistent_reasons": list(self.decision.inconsistent_reasons),
+            "totem_check": self.totem_check(),
             "tone": None if self.tone is None else {
                 "gain": [_num(g) for g in self.tone["gain"]],
                 "pixels": int(self.tone["pixels"])},
         }
+
+    def totem_check(self) -> dict | None:
+        """report.json's ``totem_check``: the line, the totems named, and per totem (left
+        to right) its worst region's ``score`` and ``lead`` (discord units), where that
+        region lies (``centre_px`` [u, v] and ``radius_px`` in the photo's pixels; null
+        where nothing of the totem was predicted) and the share of its pixels ``judged``;
+        None without totem rays."""
+        a = self.agreement
+        if a is None:
+            return None
+        named = set(self.decision.totems_named)
+        totems = []
+        for j in range(len(a.score)):
+            where = None if not np.isfinite(a.score[j]) else {
+                "centre_px": [round(float(a.centre[j, 0]), 1),
+                              round(float(a.centre[j, 1]), 1)],
+                "radius_px": round(float(a.radius[j]), 1)}
+            totems.append({"totem": j, "named": j in named, "score": _num(a.score[j]),
+                           "lead": _num(a.lead[j]), "judged": _num(a.judged[j]),
+                           "where": where})
+        return {"line": float(verdict_mod.TOTEM_LEAD),
+                "min_others": int(agreement.MIN_OTHERS),
+                "named": sorted(named), "totems": totems}
 
 
 def _p(x):

@@ -21,7 +21,7 @@ from verify.metrics.patches import METRICS
 from verify.report.findings import Report
 
 __all__ = ["MAX_SIDE", "METRIC_WORDS", "environment", "data_uri", "png_uri", "unpath",
-           "render_report", "render_bench", "markdown_blocks"]
+           "render_report", "render_bench", "markdown_blocks", "agreement_picture"]
 
 MAX_SIDE = 800
 """Longest side (px) of an embedded picture; larger ones are downscaled."""
@@ -33,6 +33,8 @@ JPEG_QUALITY = 85
 MASK_RGB = (1.0, 0.15, 0.85)        # the totem mask's outline (sRGB)
 FIT_RGB = (0.1, 1.0, 1.0)           # the fitted sphere's outline (sRGB)
 REGION_RGB = (1.0, 0.85, 0.1)       # the protected region's edge (sRGB)
+NAMED_RGB = (1.0, 0.1, 0.1)         # the circle round a named totem's region (sRGB)
+WORST_RGB = (1.0, 1.0, 1.0)         # the circle round another totem's worst region
 
 METRIC_WORDS = {
     "L1": "colour difference from the re-rendered view (NeRF units: 2x sRGB)",
@@ -166,6 +168,43 @@ def totem_picture(image: np.ndarray, totem_mask: np.ndarray, silhouette: np.ndar
     return out
 
 
+def agreement_picture(image: np.ndarray, contrast: np.ndarray, mask: np.ndarray,
+                      centre, radius: float, named: bool, vmax: float):
+    """A close-up of one totem checked against the others: the photo in grey with its
+    regions' discord contrast (:func:`verify.metrics.agreement.disc_contrast`, 0 to
+    ``vmax`` in turbo colours, where it was judged) and a circle round its worst region
+    (``centre`` (u, v) and ``radius`` in pixels; red when the totem is ``named``), (h, w,
+    3) sRGB at most ``TOTEM_SIDE`` px; None for an empty mask."""
+    from PIL import Image
+
+    from verify.metrics.patches import colorize
+
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return None
+    H, W = mask.shape
+    m = max(4, int(0.3 * max(np.ptp(rows), np.ptp(cols))))
+    y0, y1 = max(0, rows.min() - m), min(H, rows.max() + m + 1)
+    x0, x1 = max(0, cols.min() - m), min(W, cols.max() + m + 1)
+    img = np.asarray(image, np.float32)[y0:y1, x0:x1]
+    grey = np.repeat((img @ np.array([0.299, 0.587, 0.114], np.float32))[..., None], 3, 2)
+    c = np.asarray(contrast, np.float64)[y0:y1, x0:x1]
+    seen = np.isfinite(c)
+    crop = 0.6 * grey
+    w = 0.7 * np.clip(c[seen] / vmax, 0.2, 1.0)[:, None]        # low contrast: mostly grey
+    crop[seen] = (1.0 - w) * grey[seen] + w * colorize(np.clip(c[seen], 0.0, None), vmax)
+    zoom = min(MAX_ZOOM, TOTEM_SIDE / max(crop.shape[:2]))
+    size = (max(1, round(crop.shape[1] * zoom)), max(1, round(crop.shape[0] * zoom)))
+    out = np.asarray(Image.fromarray(_u8(crop)).resize(size, Image.NEAREST)) / 255.0
+    if centre is not None and np.all(np.isfinite(centre)):
+        yy, xx = np.mgrid[0:size[1], 0:size[0]]
+        u = (xx + 0.5) / zoom - 0.5 + x0
+        v = (yy + 0.5) / zoom - 0.5 + y0
+        d = np.hypot(u - centre[0], v - centre[1])
+        out[np.abs(d - radius) <= 1.0 / zoom + 0.5] = NAMED_RGB if named else WORST_RGB
+    return out
+
+
 # --------------------------------------------------------------------------- words
 
 def _fmt(x, spec: str = ".3g") -> str:
@@ -200,9 +239,21 @@ def verdict_words(data: dict) -> dict:
                     f"{100 * least:.0f} % needed); nothing in that part disagrees with "
                     f"what they saw.")
     else:
-        where = f"{n} place{'s' if n != 1 else ''}" if n else "part"
-        headline = (f"Inconsistent: {where} in the protected region disagree"
-                    f"{'s' if n <= 1 else ''} with what the totems saw (outlined below).")
+        reasons = data.get("inconsistent_reasons") or ["photo"]
+        parts = []
+        if "photo" in reasons:
+            where = f"{n} place{'s' if n != 1 else ''}" if n else "part"
+            parts.append(f"{where} in the protected region disagree"
+                         f"{'s' if n <= 1 else ''} with what the totems saw (outlined "
+                         f"below)")
+        if "totem" in reasons:
+            named = (data.get("totem_check") or {}).get("named") or []
+            which = " and ".join(f"totem {j + 1}" for j in named) or "a totem"
+            parts.append(f"{which} (counted from the left) "
+                         f"{'sees' if len(named) <= 1 else 'see'} what the other totems "
+                         f"contradict (circled under 'The totems checked against each "
+                         f"other'): a totem's view disagrees with the others")
+        headline = "Inconsistent: " + "; and ".join(parts) + "."
     p, at_line = data.get("p_value"), data.get("line_p_value")
     if p is None:
         odds = ("No p-value: this report was made without a calibration on untouched "
@@ -273,6 +324,53 @@ def _totems(report: Report, data: dict) -> list[dict]:
     return out
 
 
+def _agreement(report: Report, data: dict) -> dict | None:
+    """The totems checked against each other: the line, and per totem a close-up of its
+    discord contrast with its worst region circled, its score and lead, and whether it
+    is named; None when the check did not run."""
+    check, a = data.get("totem_check"), report.agreement
+    if check is None or a is None:
+        return None
+    masks = None if report.silhouettes is None else report.silhouettes
+    vmax = 1.5 * check["line"]
+    rows = []
+    for t in check["totems"]:
+        j = t["totem"]
+        mask = _totem_mask(report, j) if masks is None else masks[j] & report.totem_mask
+        where = t["where"]
+        pic = agreement_picture(report.image, a.contrast, mask,
+                                None if where is None else where["centre_px"],
+                                0.0 if where is None else where["radius_px"], t["named"],
+                                vmax)
+        rows.append({"n": j + 1, "uri": None if pic is None else data_uri(pic),
+                     "named": t["named"], "score": _fmt(t["score"], ".2f"),
+                     "lead": _fmt(t["lead"], "+.2f"),
+                     "judged": _fmt(None if t["judged"] is None else 100 * t["judged"],
+                                    ".0f"),
+                     "where": "–" if where is None else
+                     "{:.0f}, {:.0f} (radius {:.0f})".format(*where["centre_px"],
+                                                             where["radius_px"])})
+    named = [j + 1 for j in check["named"]]
+    words = " and ".join(f"Totem {n}" for n in named) + \
+        (" disagrees" if len(named) == 1 else " disagree") + " with the other totems"
+    return {"line": _fmt(check["line"], ".2f"), "vmax": _fmt(vmax, ".2f"),
+            "min_others": check["min_others"], "totems": rows, "named": named,
+            "named_words": words}
+
+
+def _totem_mask(report: Report, j: int) -> np.ndarray:
+    """Totem ``j``'s pixels when the fitted outlines are unknown: the connected part of
+    the totem mask that holds its worst region (or none)."""
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(report.totem_mask)
+    c = report.agreement.centre[j]
+    if not np.all(np.isfinite(c)):
+        return np.zeros_like(report.totem_mask)
+    k = labels[int(round(c[1])), int(round(c[0]))]
+    return labels == k if k else np.zeros_like(report.totem_mask)
+
+
 def render_report(report: Report, overlays: dict) -> str:
     """report.html of a :class:`verify.report.findings.Report`, as text.
 
@@ -295,6 +393,8 @@ def render_report(report: Report, overlays: dict) -> str:
         "evidence": data["evidence"],
         "region": data["region"], "region_words": REGION_WORDS.get(data["region"], ""),
         "totems": _totems(report, data),
+        "agreement": _agreement(report, data),
+        "named_rgb": _css(NAMED_RGB),
         "fit_rgb": _css(FIT_RGB), "mask_rgb": _css(MASK_RGB),
         "fingerprint": data["key_fingerprint"],
         "versions": [(unpath(k), unpath(v)) for k, v in data["versions"].items()],

@@ -18,7 +18,7 @@ from inverse.grid import FrustumFrame
 from scenes import folder
 from scenes.camera import sphere_silhouette
 from scenes.errors import BadInput
-from verify.metrics import absence, corroborate, evidence, patches, region
+from verify.metrics import absence, agreement, corroborate, evidence, patches, region
 from verify.metrics import resolution, tone
 from verify.metrics.truth import truth_metrics
 from verify.report import html_report
@@ -62,6 +62,9 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     truth : ground truth of a synthetic scene, for the metrics read off it
         (:func:`verify.metrics.truth.truth_metrics`; else null).
     thresholds : {metric: scale} overriding ``verdict.THRESHOLDS``.
+    The totems are also checked against each other
+    (:func:`verify.metrics.agreement.totem_agreement`, with the key's radius and IoR to put
+    each ray back on its pixel) when the fit has its rays.
     calibration : the verdict's calibration (:func:`verify.verdict.verdict.decide`): the
         shipped one by default, a :class:`verify.verdict.calibration.Calibration`, or None.
     versions : extra version info for the report (e.g. ``backend.describe()``).
@@ -109,9 +112,13 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     cover = {m: patches.patch_fraction(where.get(m, judged), judging) for m in inside}
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
     holdout = fit_holdout(fit)
+    agree = None if rays is None else agreement.totem_agreement(
+        rays, fit.centers, scene.radius, scene.ior, scene.K,
+        FrustumFrame.from_dict(fit.grid), image, scene.masks)
     decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
                                   calibration=calibration, judged_fraction=judged_fraction,
-                                  holdout=holdout)
+                                  holdout=holdout,
+                                  totem_lead=None if agree is None else agree.lead)
 
     metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
                "recon_L1": None, "pose_L1": None, "manip_judged": None}
@@ -143,7 +150,7 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         silhouettes=np.stack(silhouettes) if silhouettes else None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
         judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found,
-        holdout=holdout, judging=judging)
+        holdout=holdout, judging=judging, agreement=agree)
 
 
 def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,

@@ -15,8 +15,11 @@ totems resolve) and gives a score, in its units (sRGB):
 
 The photo is *unverifiable* when its fit predicts each totem from the others worse than
 ``MAX_HOLDOUT``, whatever its score; else *inconsistent* when any metric's score exceeds its
-threshold (``THRESHOLDS``); else *unverifiable* when less than ``MIN_JUDGED`` of it is
-judged; else *consistent*. The reported ``score`` (the ``statistic``) is the largest
+threshold (``THRESHOLDS``: the reason "photo"), or when one totem's view disagrees with
+the other totems' where they agree (its lead, :mod:`verify.metrics.agreement`, over
+``TOTEM_LEAD``: the reason "totem", that totem named); else *unverifiable* when less than
+``MIN_JUDGED`` of it is judged; else *consistent*. The totem test has its own line and
+stays out of the statistic, so the calibration's p-values are the photo's alone. The reported ``score`` (the ``statistic``) is the largest
 ``score_m / threshold_m``, so 1 is the line; its p-value, the chance an untouched photo of
 the calibration set scores as high (:mod:`verify.verdict.calibration`), is reported beside
 it, with the line's own (about 0.05). The judged patches depend on the fit alone, which an
@@ -55,8 +58,9 @@ from verify.metrics.patches import GRID, MIN_PATCH_PX, PATCH_PX, PatchGrid, patc
 
 __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLDS",
            "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED",
-           "MAX_HOLDOUT", "RANGE_MIN_PARALLAX", "Verdict",
-           "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers"]
+           "MAX_HOLDOUT", "RANGE_MIN_PARALLAX", "TOTEM_LEAD", "Verdict",
+           "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers",
+           "name_totems"]
 
 RANGE_THRESHOLD = 0.318
 """RANGE score (mean of the worst patches' :func:`verify.metrics.patches.range_distance`
@@ -120,6 +124,17 @@ pixels set it, so no edit outside them moves it (see docs/decisions.md, 'verdict
 unverifiable where the totems do not predict each other')."""
 
 
+TOTEM_LEAD = 1.0
+"""A totem whose worst region disagrees with the other totems this much more than theirs
+do (its ``lead`` over their median, :class:`verify.metrics.agreement.Agreement`, in
+discord units) is named, and the photo is inconsistent: its view disagrees with the
+others' there. Just above the largest lead of the development set's untouched photos
+(0.995, one outdoor scene whose totem alone sees a ball beside it; the next 0.51), so
+that the test adds no false alarm there; a test of its own, outside the calibrated
+statistic (see docs/decisions/verify-verdict.md, 'verdict: a totem that disagrees with
+the others makes the photo inconsistent, on a line of its own')."""
+
+
 @dataclass
 class Verdict:
     """The image-level decision and what drove it.
@@ -145,6 +160,10 @@ class Verdict:
     reason : why an unverifiable photo is: "holdout" (the totems do not predict each
         other, ``MAX_HOLDOUT``) or "judged" (too little of it judged, ``MIN_JUDGED``);
         None otherwise.
+    totems_named : the totems (indices, left to right) whose view disagrees with the
+        others' (lead over ``TOTEM_LEAD``), whatever the verdict.
+    inconsistent_reasons : why an inconsistent photo is: "photo" (a metric over its
+        threshold) and/or "totem" (a totem named); empty otherwise.
     """
 
     verdict: str
@@ -160,6 +179,8 @@ class Verdict:
     p_value: float | None = None
     line_p_value: float | None = None
     reason: str | None = None
+    totems_named: list = field(default_factory=list)
+    inconsistent_reasons: list = field(default_factory=list)
 
 
 def judging_grid(shape, *, grid: int = GRID, patch: int = PATCH_PX) -> PatchGrid:
@@ -225,11 +246,20 @@ def judgeable(judged: np.ndarray, grid, *, min_cover: float = MIN_COVER) -> np.n
 _SHIPPED = "shipped"
 
 
+def name_totems(lead, line: float = TOTEM_LEAD) -> list[int]:
+    """The totems (indices) whose ``lead`` (n,) (NaN: not judged) is over ``line``."""
+    if lead is None:
+        return []
+    lead = np.asarray(lead, np.float64)
+    return [int(j) for j in np.nonzero(np.nan_to_num(lead, nan=-np.inf) > line)[0]]
+
+
 def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
            calibration=_SHIPPED, reference: str = "none",
            judged_fraction: float | None = None,
            min_judged: float = MIN_JUDGED, holdout: float | None = None,
-           max_holdout: float = MAX_HOLDOUT) -> Verdict:
+           max_holdout: float = MAX_HOLDOUT, totem_lead=None,
+           totem_line: float = TOTEM_LEAD) -> Verdict:
     """The verdict from patch scores.
 
     Parameters
@@ -251,6 +281,9 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
         ``min_judged`` a photo that is not inconsistent is ``unverifiable``.
     holdout : the fit's leave-one-totem-out error (sRGB L1, ``MAX_HOLDOUT``); above
         ``max_holdout`` the photo is ``unverifiable`` whatever its score (None: no test).
+    totem_lead : (n,) each totem's lead (:class:`verify.metrics.agreement.Agreement`),
+        NaN where not judged; a totem over ``totem_line`` makes the photo inconsistent
+        (unless it is unverifiable by ``holdout``). None: no test.
 
     Raises
     ------
@@ -267,8 +300,10 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     if not judged and judged_fraction is None:
         raise BadInput("no patch of the photo is judged: the totems establish too little of "
                        "it to verify (place them nearer the subject)")
+    named = name_totems(totem_lead, totem_line)
     if not judged:
-        return _unverifiable(limits, grid, calibration, _holdout_fails(holdout, max_holdout))
+        return _unverifiable(limits, grid, calibration, _holdout_fails(holdout, max_holdout),
+                             named)
     used = np.logical_or.reduce([used_by[m] for m in judged])
     medians, scores, ratios = {}, {}, []
     for m in judged:
@@ -279,9 +314,10 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     excess = np.where(used, ratios.max(axis=0), np.nan)
     worst = np.where(used, ratios.argmax(axis=0), 0)
     score = max(scores[m] / limits[m] for m in judged)
-    verdict, reason = ("inconsistent" if score > 1.0 else "consistent"), None
+    reasons = ["photo"] * (score > 1.0) + ["totem"] * bool(named)
+    verdict, reason = ("inconsistent" if reasons else "consistent"), None
     if _holdout_fails(holdout, max_holdout):
-        verdict, reason = "unverifiable", "holdout"
+        verdict, reason, reasons = "unverifiable", "holdout", []
     elif verdict == "consistent" and judged_fraction is not None \
             and judged_fraction < min_judged:
         verdict, reason = "unverifiable", "judged"
@@ -289,20 +325,27 @@ def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
     drivers = name_drivers(excess, used, grid, judged, worst, patch_scores, limit)
     p_value, line_p_value = _p_values(score, calibration)
     return Verdict(verdict, score, 1.0, scores, limits, medians, excess, used, drivers,
-                   score, p_value, line_p_value, reason)
+                   score, p_value, line_p_value, reason, named, reasons)
 
 
 def _holdout_fails(holdout: float | None, max_holdout: float) -> bool:
     return holdout is not None and bool(np.isfinite(holdout)) and holdout > max_holdout
 
 
-def _unverifiable(limits: dict, grid, calibration, holdout_fails: bool = False) -> Verdict:
-    """The verdict of a photo no metric can judge anywhere."""
+def _unverifiable(limits: dict, grid, calibration, holdout_fails: bool = False,
+                  named=()) -> Verdict:
+    """The verdict of a photo no metric can judge anywhere: unverifiable, or
+    inconsistent when a totem is ``named`` and the totems otherwise predict each
+    other."""
     shape = (grid.n, grid.n)
     p_value, line_p = _p_values(0.0, calibration)
+    if named and not holdout_fails:
+        return Verdict("inconsistent", 0.0, 1.0, {}, limits, {}, np.full(shape, np.nan),
+                       np.zeros(shape, bool), [], 0.0, p_value, line_p, None,
+                       list(named), ["totem"])
     return Verdict("unverifiable", 0.0, 1.0, {}, limits, {}, np.full(shape, np.nan),
                    np.zeros(shape, bool), [], 0.0, p_value, line_p,
-                   "holdout" if holdout_fails else "judged")
+                   "holdout" if holdout_fails else "judged", list(named))
 
 
 def _p_values(score: float, calibration):
