@@ -12,7 +12,22 @@ the share of those pixels it gives a depth at all, and the share within 5 %:
 - ``wta``: per cell of the evidence map's grid, the slice where the landing totems'
   colours agree best (at least two, parallax at least MIN_PARALLAX);
 - ``front``: the nearest slice where they agree within AGREE (the evidence map's test);
-- ``sgm``: the agreement cost aggregated by semi-global matching, then the best slice.
+- ``sgm``: the agreement cost aggregated by semi-global matching, then the best slice;
+- ``plane`` (totems resting only): the support plane the totems touch
+  (:func:`inverse.view.support.plane_from_centres`, from the fitted centres and the key's
+  radius), where it lies in front of the camera;
+- ``sgm+plane`` (totems resting only): ``sgm``, snapped to the plane where the two lie
+  within ``--snap`` of each other (the floor or table at its plane, what stands on it
+  or lies beyond its edge where stereo puts it);
+- ``agree+plane`` (totems resting only): per cell of the map, the plane where the
+  totems agree at its depth (within a slice, the evidence's AGREE) and at no slice more
+  than one in front of it; ``sgm`` elsewhere;
+- ``sgm-prior`` (totems resting only): semi-global matching of the cost less ``--prior``
+  (in units of the median cost) at the plane's slice and its neighbours, then snapped
+  to the plane where it chose those (a surface prior, not a rule on the result);
+- ``prior+front`` (totems resting only): ``sgm-prior`` with the bonus only where no
+  slice more than one in front of the plane's has the totems agreeing (``front``): a
+  plane hidden behind a surface the totems agree on is not preferred.
 """
 
 from __future__ import annotations
@@ -24,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-CANDIDATES = ("fit", "wta", "front", "sgm")
+CANDIDATES = ("fit", "wta", "front", "sgm", "plane", "sgm+plane", "agree+plane", "sgm-prior", "prior+front")
 
 
 def _refine(cost, k, z):
@@ -43,9 +58,23 @@ def _refine(cost, k, z):
     return 1.0 / (inv[k] + np.clip(off, -0.5, 0.5) * step[k])
 
 
-def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None) -> dict:
+def plane_depth(plane, K, size) -> np.ndarray:
+    """(H, W) camera-frame depth (metres) where each pixel's ray meets ``plane``
+    (a :class:`~inverse.view.support.SupportPlane`), NaN where it does not (behind the
+    camera or parallel); ``size`` (W, H), OpenCV pixel centres."""
+    W, H = size
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = plane.offset / (d @ plane.normal)
+    return np.where(np.isfinite(z) & (z > 0), z, np.nan)
+
+
+def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None,
+               resting: bool = False, snap: float = 0.2, prior: float = 0.5) -> dict:
     """Each candidate's (H, W) depth map (NaN where it gives none), metres; the sweep
-    over ``n_slices`` slices to ``far`` metres (default the fit's frame's)."""
+    over ``n_slices`` slices to ``far`` metres (default the fit's frame's); with
+    ``resting``, the support plane's and SGM snapped to it within ``snap`` (relative)."""
     from inverse.grid import FrustumFrame, cells_to_pixels
     from inverse.view.sweep import semi_global
     from scenes.reach import MIN_PARALLAX
@@ -79,6 +108,45 @@ def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None) -> d
     out["sgm"] = np.where(ok.any(axis=0), _refine(agg, ks, z), np.nan)
     for name in ("wta", "front", "sgm"):
         out[name] = cells_to_pixels(out[name], frame, (W, H), nearest=True)
+    if resting:
+        from inverse.view.support import plane_from_centres
+        plane = plane_from_centres(fit.centers, scene.radius)
+        if plane is not None:
+            zp = plane_depth(plane, np.asarray(scene.K, float), (W, H))
+            out["plane"] = zp
+            near = np.abs(out["sgm"] - zp) <= snap * zp
+            out["sgm+plane"] = np.where(near, zp, out["sgm"])
+            from verify.metrics.corroborate import cell_centres
+            uu, vv = cell_centres(frame, cost.shape[1:])
+            d = np.stack([(uu - scene.K[0][2]) / scene.K[0][0],
+                          (vv - scene.K[1][2]) / scene.K[1][1], np.ones_like(uu)], -1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                zc = plane.offset / (d @ plane.normal)
+            inv = 1.0 / z
+            kp = np.argmin(np.abs(inv[:, None, None] - 1.0 / np.where(zc > 0, zc, np.inf)),
+                           axis=0)
+            at = np.zeros_like(agree[0])
+            for dk in (-1, 0, 1):
+                kk = np.clip(kp + dk, 0, len(z) - 1)
+                at |= np.take_along_axis(agree, kk[None], 0)[0]
+            front_ok = ~agree.any(axis=0) | (kf >= kp - 1)
+            take = at & front_ok & np.isfinite(zc) & (zc > 0)
+            take_px = cells_to_pixels(take.astype(float), frame, (W, H), nearest=True) > 0.5
+            out["agree+plane"] = np.where(take_px & np.isfinite(zp), zp, out["sgm"])
+            has_p = np.isfinite(zc) & (zc > 0)
+            for name, where in (("sgm-prior", has_p), ("prior+front", has_p & front_ok)):
+                cp = c.copy()
+                for dk in (-1, 0, 1):
+                    kk = np.clip(kp + dk, 0, len(z) - 1)
+                    cur = np.take_along_axis(cp, kk[None], 0)[0]
+                    np.put_along_axis(cp, kk[None], np.where(where, cur - prior, cur)[None], 0)
+                agg_p = semi_global(cp - cp.min(), 0.3, 3.0)
+                kq = np.argmin(agg_p, axis=0)
+                on = has_p & (np.abs(kq - kp) <= 1)
+                zq = np.where(ok.any(axis=0), _refine(agg_p, kq, z), np.nan)
+                zq_px = cells_to_pixels(zq, frame, (W, H), nearest=True)
+                on_px = cells_to_pixels(on.astype(float), frame, (W, H), nearest=True) > 0.5
+                out[name] = np.where(on_px & np.isfinite(zp), zp, zq_px)
     return out
 
 
@@ -88,6 +156,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--slices", type=int, default=64)
     p.add_argument("--far", type=float, default=None)
+    p.add_argument("--snap", type=float, default=0.2,
+                   help="sgm+plane: relative distance within which SGM snaps to the plane")
+    p.add_argument("--prior", type=float, default=0.5,
+                   help="sgm-prior: the plane's bonus, in median costs")
+    p.add_argument("--only", default=None, help="comma-separated photo names")
     args = p.parse_args(argv)
     from inverse.fit.files import load_fit
     from scenes import folder
@@ -100,6 +173,8 @@ def main(argv=None) -> int:
         fit_dir = args.bench / "runs" / f"{run['name']}-joint" / "fit"
         if run.get("mode") != "joint" or run.get("kind") != "none" or not fit_dir.is_dir():
             continue
+        if args.only and run["name"] not in args.only.split(","):
+            continue
         truth, scene = folder.read_truth(sd), folder.read_scene(sd)
         fit = load_fit(fit_dir)
         if truth is None or truth.reach is None or fit.rays is None:
@@ -107,7 +182,10 @@ def main(argv=None) -> int:
         r = truth.reach
         at = r.in_reach() & ~r.backdrop & np.isfinite(r.depth)
         zt = r.depth.astype(np.float64)
-        for name, zc in candidates(fit, scene, n_slices=args.slices, far=args.far).items():
+        resting = run.get("placement") == "resting" or run["preset"] == "tabletop"
+        for name, zc in candidates(fit, scene, n_slices=args.slices, far=args.far,
+                                   resting=resting, snap=args.snap,
+                                   prior=args.prior).items():
             given = at & np.isfinite(zc)
             err = np.abs(zc[given] - zt[given]) / zt[given]
             row = {"name": sd.name, "preset": run["preset"],
