@@ -277,14 +277,17 @@ def by_coverage(edited: list[dict], key: str = "manip_judged",
     return out
 
 
-REACH_FIGURES = ("reach_fraction", "reach_judged", "judged_seen", "depth_error")
+REACH_FIGURES = ("reach_fraction", "reach_judged", "judged_seen", "depth_error",
+                 "totem_depth_error", "totem_depth_given", "totem_depth_within")
 
 
 def by_reach(rows: list[dict]) -> list[str]:
     """Markdown rows: per preset and placement, the medians (and the photos that have
     them) of what the truth's reach says of the evidence map: the reach's share of the
     photo, the share of it judged, the share of the judged that two totems truly see,
-    and the view's median relative depth error over it (``verify.metrics.truth``)."""
+    the view's median relative depth error over it, and the same of the depth the totems
+    establish, the share of the reach it is given on and the share of those whose true
+    depth lies in its interval (``verify.metrics.truth``)."""
     by = defaultdict(list)
     for r in rows:
         if (r.get("metrics") or {}).get("reach_fraction") is not None:

@@ -84,3 +84,13 @@ def test_one_totem_or_two_that_disagree_do_not_resolve_a_wall():
                                   _frame(50.0), SIZE)
     ok = evidence.evidence_map(_fans(centers, 2.5), centers, _frame(50.0), SIZE)
     assert apart.resolved.mean() < 0.5 * ok.resolved.mean()     # chance: a fifth
+
+
+def test_the_map_puts_a_textured_wall_at_its_depth_within_its_interval():
+    centers = np.array([[-0.25, 0.1, 1.0], [0.25, 0.1, 1.0]])
+    ev = evidence.evidence_map(_fans(centers, 2.5), centers, _frame(50.0), SIZE)
+    z, lo, hi = ev.depth[ev.resolved], ev.depth_lo[ev.resolved], ev.depth_hi[ev.resolved]
+    assert np.isnan(ev.depth[~ev.resolved]).all()
+    assert np.median(np.abs(z - 2.5) / 2.5) < 0.05
+    assert ((lo <= 2.5) & (hi >= 2.5)).mean() > 0.8
+    assert (lo <= z).all() and (z <= hi).all()

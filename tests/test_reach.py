@@ -155,14 +155,26 @@ def test_truth_metrics_count_the_reach_from_both_sides():
     manip = np.zeros((H, W), bool)
     manip[10:20, W // 4: W // 4 + 20] = True
     view_depth = np.full((H, W), 3.3)
+    # the totems give a depth 2 % off on the reach's left half; its interval holds the
+    # truth on the left quarter of the reach only
+    cols = np.arange(W)[None, :].repeat(H, 0)
+    a, b = W // 4, W // 2                      # the reach's columns
+    mid, q = (a + b) // 2, (3 * a + b) // 4
+    z = np.where(cols < mid, 3.06, np.nan)
+    lo = np.where(cols < q, 2.95, 3.02)
+    hi = np.where(cols < q, 3.05, 3.1)
     m = truth_metrics(truth, fitted=np.zeros((H, W, 3)), centers=np.stack([P1, P2]),
                       seen=np.ones((H, W), bool), judged=judged,
-                      totem_mask=np.zeros((H, W), bool), manip=manip, depth=view_depth)
+                      totem_mask=np.zeros((H, W), bool), manip=manip, depth=view_depth,
+                      totem_depth=(z, lo, hi))
     assert m["reach_fraction"] == pytest.approx(0.25)
     assert m["reach_judged"] == pytest.approx(1.0)
     assert m["judged_seen"] == pytest.approx(0.5)
     assert m["manip_in_reach"] == pytest.approx(1.0)
     assert m["depth_error"] == pytest.approx(0.1)
+    assert m["totem_depth_error"] == pytest.approx(0.02)
+    assert m["totem_depth_given"] == pytest.approx((mid - a) / (b - a))
+    assert m["totem_depth_within"] == pytest.approx((q - a) / (mid - a))
     assert m["recon_L1"] == 0.0 and m["pose_L1"] == 0.0
 
 

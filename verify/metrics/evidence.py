@@ -34,7 +34,10 @@ judges the resolved pixels, RANGE those resolved to twice the parallax
 whose landing totems resolve depth (:func:`verify.metrics.absence.absence`,
 ``min_parallax``).
 
-The fit's own depth was not used: its grid often puts a near floor at the far plane
+Where it is resolved the map also holds the depth the totems establish there, with its
+interval (:func:`inverse.view.depth.established_depth` on the same slices; with resting
+totems' support plane as a prior when one is given). The fit's own depth was not used
+for the map: its grid often puts a near floor at the far plane
 (a far backdrop explains each ray on its own), and the map built on it judged a fifth
 of the photo (see docs/decisions.md, 'evidence: the totems' agreement, not the fit's
 depth').
@@ -48,13 +51,16 @@ import numpy as np
 
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
+from inverse.view.depth import established_depth, plane_slice
+from inverse.view.support import SupportPlane
 from scenes.camera import pixel_rays
 from scenes.reach import (COS_EVIDENCE, MIN_PARALLAX, MIN_TOTEMS, angular_spacing,
                           pair_parallax)
 from verify.metrics.corroborate import cell_centres, ray_slices
 
 __all__ = ["MIN_TOTEMS", "MIN_PARALLAX", "AGREE", "COS_EVIDENCE", "Evidence",
-           "angular_spacing", "pair_parallax", "slice_parallax", "evidence_map"]
+           "angular_spacing", "pair_parallax", "slice_parallax", "evidence_map",
+           "support_plane"]
 
 AGREE = 0.03
 """Largest spread (sRGB, root mean square over the landing totems and the channels) at
@@ -73,12 +79,18 @@ class Evidence:
     resolved : (H, W) bool, ``n_totems >= MIN_TOTEMS`` and ``parallax >= MIN_PARALLAX``.
     spacing : (n,) each totem's rays' angular spacing, radians (NaN for a totem with
         fewer than two rays).
+    depth, depth_lo, depth_hi : (H, W) float, the depth the totems establish
+        (camera-frame ``z``, metres) and its interval, NaN where not resolved; where the
+        support plane was chosen, the plane's own depth at the pixel (None: not made).
     """
 
     n_totems: np.ndarray
     parallax: np.ndarray
     resolved: np.ndarray
     spacing: np.ndarray
+    depth: np.ndarray | None = None
+    depth_lo: np.ndarray | None = None
+    depth_hi: np.ndarray | None = None
 
 
 def slice_parallax(sc, frame, centers: np.ndarray, spacing: np.ndarray) -> np.ndarray:
@@ -103,7 +115,7 @@ def slice_parallax(sc, frame, centers: np.ndarray, spacing: np.ndarray) -> np.nd
 def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size, *,
                  min_totems: int = MIN_TOTEMS, min_parallax: float = MIN_PARALLAX,
                  agree: float = AGREE, cos_evidence: float = COS_EVIDENCE,
-                 slices=None) -> Evidence:
+                 slices=None, plane=None) -> Evidence:
     """The evidence map of a photo from its totem rays (see the module docstring).
 
     Parameters
@@ -115,6 +127,8 @@ def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size
     min_totems, min_parallax, agree, cos_evidence : see the module constants.
     slices : :func:`verify.metrics.corroborate.ray_slices` of these rays, when already made
         (CORROB reads the same).
+    plane : the support plane resting totems touch
+        (:class:`inverse.view.support.SupportPlane`), a prior for the depth; None: none.
     """
     centers = np.asarray(centers, np.float64)
     rays = rays.entering_at_least(cos_evidence)
@@ -130,4 +144,43 @@ def evidence_map(rays: TotemRays, centers: np.ndarray, frame: FrustumFrame, size
     n_totems = np.rint(cells_to_pixels(n_cell, frame, (W, H), nearest=True))
     parallax = cells_to_pixels(p_cell, frame, (W, H), nearest=True)
     resolved = (n_totems >= min_totems) & (parallax >= min_parallax)
-    return Evidence(n_totems.astype(np.int64), parallax, resolved, spacing)
+    depth = _depth(sc, par, var, frame, (W, H), resolved, min_parallax, agree, plane)
+    return Evidence(n_totems.astype(np.int64), parallax, resolved, spacing, *depth)
+
+
+def support_plane(geometry: dict | None) -> SupportPlane | None:
+    """The support plane a fit took its resting totems to touch (``fit.json``
+    ``geometry.support``: ``totems fit --resting``), or None."""
+    sp = (geometry or {}).get("support")
+    if not sp:
+        return None
+    return SupportPlane(np.asarray(sp["normal"], np.float64), float(sp["offset"]),
+                        float(sp.get("residual", 0.0)))
+
+
+def _depth(sc, par, var, frame, size, resolved, min_parallax, agree, plane):
+    """The established depth and its interval per pixel (metres, NaN where not
+    resolved), the plane's own depth where it was chosen."""
+    W, H = size
+    res = var.shape[1:]
+    kp, _ = (None, None) if plane is None else plane_slice(plane, frame, res, sc.z)
+    est = established_depth(var, sc.consistency[0], par, sc.z, min_parallax=min_parallax,
+                            agree_var=3.0 * agree ** 2, plane_k=kp)
+    out = [cells_to_pixels(a, frame, (W, H), nearest=True) for a in (est.z, est.lo, est.hi)]
+    if plane is not None:
+        on = cells_to_pixels(est.on_plane.astype(np.float64), frame, (W, H),
+                             nearest=True) > 0.5
+        zp = plane.depth(_pixel_directions(frame.K, (W, H)))
+        zp = np.where(np.isfinite(zp), zp, np.nan).reshape(H, W)
+        out[0] = np.where(on & np.isfinite(zp), zp, out[0])
+    return tuple(np.where(resolved, a, np.nan).astype(np.float32) for a in out)
+
+
+def _pixel_directions(K, size):
+    """(H*W, 3) camera-frame directions with ``z = 1`` through every pixel centre
+    (OpenCV convention)."""
+    W, H = size
+    K = np.asarray(K, np.float64)
+    u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1],
+                     np.ones_like(u)], -1).reshape(-1, 3)

@@ -18,7 +18,8 @@ from scenes.reach import MIN_TOTEMS
 __all__ = ["TRUTH_METRICS", "truth_metrics"]
 
 TRUTH_METRICS = ("recon_L1", "pose_L1", "reach_fraction", "reach_judged", "judged_seen",
-                 "manip_in_reach", "depth_error")
+                 "manip_in_reach", "depth_error", "totem_depth_error", "totem_depth_given",
+                 "totem_depth_within")
 """report.json's metrics read off the truth (null where the truth does not hold them)."""
 
 
@@ -29,7 +30,7 @@ def _share(part: np.ndarray, whole: np.ndarray) -> float | None:
 
 def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.ndarray,
                   judged: np.ndarray, totem_mask: np.ndarray, manip=None,
-                  depth=None) -> dict:
+                  depth=None, totem_depth=None) -> dict:
     """The metrics of :data:`TRUTH_METRICS` (each None where it cannot be read).
 
     Parameters
@@ -42,6 +43,9 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
     totem_mask : (H, W) bool, the totems' pixels.
     manip : (H, W) bool, the edited pixels, or None.
     depth : (H, W) the view's depth (camera-frame z, metres), or None.
+    totem_depth : (z, lo, hi) each (H, W), the depth the totems establish and its
+        interval (metres, NaN where none: :class:`verify.metrics.evidence.Evidence`), or
+        None.
 
     Returns
     -------
@@ -51,7 +55,10 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
     is judged; ``judged_seen`` the share of the judged pixels whose surface two totems
     truly see; ``manip_in_reach`` the share of the edit in the reach; ``depth_error`` the
     median relative error of ``depth`` over the reach, ``|z - z_true| / z_true`` (a
-    backdrop's pixels left out).
+    backdrop's pixels left out); ``totem_depth_error`` the same of the totems' depth
+    over the reach's pixels where it is given, ``totem_depth_given`` the share of the
+    reach (backdrop left out) where it is, ``totem_depth_within`` the share of those
+    whose true depth lies inside its interval.
     """
     out = dict.fromkeys(TRUTH_METRICS)
     if truth is None:
@@ -81,4 +88,15 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
         if at.any():
             err = np.abs(np.asarray(depth, np.float64)[at] - z_true[at]) / z_true[at]
             out["depth_error"] = float(np.median(err))
+    if totem_depth is not None and np.shape(totem_depth[0]) == image_shape:
+        z_true = reach.depth.astype(np.float64)
+        area = inside & ~reach.backdrop & np.isfinite(z_true)
+        z, lo, hi = (np.asarray(a, np.float64) for a in totem_depth)
+        at = area & np.isfinite(z)
+        out["totem_depth_given"] = _share(at, area)
+        if at.any():
+            out["totem_depth_error"] = float(np.median(np.abs(z[at] - z_true[at])
+                                                       / z_true[at]))
+            out["totem_depth_within"] = float(((z_true[at] >= lo[at])
+                                               & (z_true[at] <= hi[at])).mean())
     return out

@@ -91,7 +91,8 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     slices = None if rays is None else corroborate.ray_slices(
         rays, FrustumFrame.from_dict(fit.grid))
     ev = None if rays is None else evidence.evidence_map(
-        rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices)
+        rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices,
+        plane=evidence.support_plane(getattr(fit, "geometry", None)))
     # each metric judges the protected pixels where its evidence holds (sRGB [0, 1]),
     # where a patch of the verdict's grid can judge them
     judged = verdict_mod.judgeable(seen if ev is None else seen & ev.resolved, judging)
@@ -132,7 +133,9 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     metrics.update(truth_metrics(truth, fitted=fitted, centers=fit.centers, seen=seen,
                                  judged=judged, totem_mask=totem_mask,
                                  manip=scene.manip_mask,
-                                 depth=getattr(fit, "recon_depth", None)))
+                                 depth=getattr(fit, "recon_depth", None),
+                                 totem_depth=None if ev is None or ev.depth is None
+                                 else (ev.depth, ev.depth_lo, ev.depth_hi)))
 
     totems, silhouettes = _totems(scene, fit)
 
@@ -289,9 +292,12 @@ def write_verify(report: Report, out_dir) -> Path:
     folder.write_image(out / "protect_mask.png", report.protected)
     if report.evidence is not None:
         folder.write_image(out / "judged_mask.png", report.judged)
+        depth = {} if report.evidence.depth is None else {
+            "depth": report.evidence.depth, "depth_lo": report.evidence.depth_lo,
+            "depth_hi": report.evidence.depth_hi}
         folder.write_npz(out / "evidence.npz", n_totems=report.evidence.n_totems
                          .astype(np.uint8), parallax=report.evidence.parallax
-                         .astype(np.float32), judged=report.judged)
+                         .astype(np.float32), judged=report.judged, **depth)
     folder.write_image(out / "recon.png", report.recon)
     overlays = {}
     for name, heat in report.heatmaps.items():
