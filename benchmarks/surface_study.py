@@ -163,6 +163,18 @@ COS_HIGH = (0.6, 0.8)
 rays nearer the rim are blurred and mixed with reflection."""
 
 
+SIGMAS = (1.0, 0.75)
+"""Splat spreads (cells) below corroborate.SIGMA_CELLS cached for the sharper
+prediction: each ray's colour spread over fewer cells (more cells where no totem lands)."""
+
+BLURS = (0.5, 0.25)
+"""Factors on the photo's blur (:func:`verify.metrics.resolution.photo_sigma`) cached
+for a sharper comparison."""
+
+CACHE_KEYS = ("reach", "truth_s75_col", "photo_b25")
+"""Keys a cache file must hold to be current (older files are made again)."""
+
+
 def _cell_index(frame, res, size):
     """(H, W) int32: the map cell (row * ns + col) each pixel centre falls in, as
     :func:`inverse.grid.cells_to_pixels` with ``nearest`` reads it."""
@@ -204,7 +216,8 @@ def _reach_cells(reach, cell, res):
 
 def _fit_arrays(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
     """What one fit gives every photo verified on it: per depth source (``truth``,
-    ``sgm``, and ``truth_c60`` ... for the rays entering at cosines COS_HIGH) each totem's
+    ``sgm``, ``truth_c60`` ... for the rays entering at cosines COS_HIGH, ``truth_s100``
+    ... for the splat spreads SIGMAS) each totem's
     sRGB colour at each cell's depth ``*_col`` (n, nt, ns, 3) float32, where it lands
     ``*_land`` (n, nt, ns) and the parallax there ``*_par`` (nt, ns) in rays' spacings;
     the cells' depths ``zt`` (truth: median over the cell, NaN for a backdrop), ``zsgm``;
@@ -226,9 +239,12 @@ def _fit_arrays(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
     spacing = evidence.angular_spacing(rays.d, rays.totem, len(fit.centers))
     out = {}
     depth = np.where(truth.reach.backdrop, np.inf, truth.reach.depth.astype(np.float64))
-    for tag, cos in [("", corroborate.COS_EVIDENCE)] + [(f"_c{round(c * 100)}", c)
-                                                         for c in COS_HIGH]:
-        sc = corroborate.ray_slices(fit.rays, frame, n_slices=n_slices, cos_evidence=cos)
+    runs = ([("", corroborate.COS_EVIDENCE, corroborate.SIGMA_CELLS)]
+            + [(f"_c{round(c * 100)}", c, corroborate.SIGMA_CELLS) for c in COS_HIGH]
+            + [(f"_s{round(g * 100)}", corroborate.COS_EVIDENCE, g) for g in SIGMAS])
+    for tag, cos, sigma in runs:
+        sc = corroborate.ray_slices(fit.rays, frame, n_slices=n_slices, cos_evidence=cos,
+                                    sigma=sigma)
         res = sc.land.shape[2:]
         par = evidence.slice_parallax(sc, frame, fit.centers, spacing)
         if not tag:
@@ -255,12 +271,13 @@ def _fit_arrays(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
     return out
 
 
-def _photo_arrays(sd: Path, fit: dict) -> dict:
+def _photo_arrays(sd: Path, fit: dict, jpeg: int | None = None) -> dict:
     """The photo at the map's cells: ``photo`` (nt, ns, 3) sRGB, blurred to the rays'
     spacing (:func:`verify.metrics.resolution.photo_sigma`) and sampled at the cell
-    centres, as :func:`study` does; ``white`` (nt, ns) the largest over the cell's pixels
+    centres, as :func:`study` does (``photo_b50`` ... with that blur times BLURS); ``white`` (nt, ns) the largest over the cell's pixels
     of the pixel's least channel (unblurred: 1 where a pixel is white); ``totem_px``
-    (H, W) the totems' pixels."""
+    (H, W) the totems' pixels. ``jpeg``: the photo first saved as a JPEG of that quality
+    (4:2:0) and read back (the camera view only; the totem rays stay the fit's)."""
     from inverse.grid import FrustumFrame
     from scenes import folder
     from verify.metrics import corroborate, patches, resolution
@@ -270,11 +287,19 @@ def _photo_arrays(sd: Path, fit: dict) -> dict:
                                     json.loads(str(fit["frame"])).items()})
     res = fit["zt"].shape
     img = np.asarray(scene.image, np.float64)
+    if jpeg is not None:
+        from scenes import jpeg as jpg
+        img = jpg.decode(jpg.encode(img, quality=jpeg, chroma="420")).astype(np.float64)
     blurred = patches.blur_varying(img, resolution.photo_sigma(fit["spx"]))
     uu, vv = corroborate.cell_centres(frame, res)
     photo = corroborate._sample(blurred.astype(np.float32), uu, vv).astype(np.float32)
     white = _cell_reduce(img.min(-1), fit["cell"], res[0] * res[1], "max").reshape(res)
-    return {"photo": photo, "white": white.astype(np.float32),
+    sharper = {}
+    for f in BLURS:
+        b = patches.blur_varying(img, resolution.photo_sigma(fit["spx"], f))
+        sharper[f"photo_b{round(f * 100)}"] = corroborate._sample(
+            b.astype(np.float32), uu, vv).astype(np.float32)
+    return {"photo": photo, **sharper, "white": white.astype(np.float32),
             "totem_px": scene.masks.any(axis=0)}
 
 
@@ -297,12 +322,8 @@ def cache_bench(bench: Path, cache: Path, names: set | None, n_slices: int,
         tj = sd / "truth" / "tamper.json"
         kind = json.loads(tj.read_text())["kind"] if tj.is_file() else "none"
         path = cache / f"{sd.name}.npz"
-        if path.is_file() and "reach" not in np.load(path).files:   # older cache
-            from scenes import folder
-            arrays = dict(np.load(path))
-            arrays["reach"] = _reach_cells(folder.read_truth(sd).reach, arrays["cell"],
-                                           arrays["zt"].shape)
-            np.savez_compressed(path, **arrays)
+        if path.is_file() and not set(CACHE_KEYS) <= set(np.load(path).files):
+            path.unlink()                                          # an older cache
         if not path.is_file():
             if fit_dir not in memo:
                 memo = {fit_dir: _fit_arrays(sd, fit_dir, n_slices, far)}
@@ -311,7 +332,7 @@ def cache_bench(bench: Path, cache: Path, names: set | None, n_slices: int,
             print(f"cached {sd.name}", flush=True)
         rows.append({"name": sd.name, "kind": kind, "preset": run.get("preset"),
                      "placement": "resting" if "-resting" in sd.name else "floating",
-                     "seed": int(sd.name.split("-")[1]), "path": path})
+                     "seed": int(sd.name.split("-")[1]), "path": path, "scene": sd})
     return rows
 
 
@@ -341,6 +362,13 @@ class Variant:
     reach : judge only cells at least this fraction of whose pixels lie in the truth's
         reach (two totems truly see the surface, no occluder in front): visibility from
         the truth, an oracle as the depth is; None: every cell.
+    sigma : each ray's splat spread, in hundredths of a cell (one of SIGMAS); None:
+        corroborate.SIGMA_CELLS (1.5 cells, 7.8 px).
+    blur : the photo's blur, in hundredths of the verify's (one of BLURS); None: the
+        verify's (:func:`verify.metrics.resolution.photo_sigma`, median 14 px).
+    resid : what ``e`` compares: ``rgb`` the sRGB colours, ``chroma`` each colour less
+        its grey level (:func:`verify.metrics.patches.chroma`: brightness left out, as
+        the verify's hue metrics do).
     """
 
     gain: str = "global"
@@ -352,6 +380,9 @@ class Variant:
     s0: float = S0
     edge: float | None = None
     reach: float | None = None
+    sigma: int | None = None
+    blur: int | None = None
+    resid: str = "rgb"
 
     def label(self) -> str:
         base = Variant()
@@ -430,18 +461,19 @@ def _patch_stat(px, grid, stat):
     return float(np.nanmax(vals)) if np.isfinite(vals).any() else np.nan
 
 
-def score(arr, v: Variant, src: str = "truth") -> dict:
+def score(arr, v: Variant, src: str = "truth", maps: bool = False) -> dict:
     """One photo's worst-patch residuals under variant ``v`` with depth source ``src``
     (``truth`` or ``sgm``) from its cached arrays (:func:`cache_bench`): ``e`` (sRGB, mean
     over channels), ``z`` (e over the totems' spread plus ``v.s0``), and ``judged`` the
-    fraction of the map's cells judged."""
+    fraction of the map's cells judged; with ``maps`` also the cell maps ``e_cells``,
+    ``z_cells`` (NaN where not judged) and the prediction ``mu`` (nt, ns, 3) sRGB."""
     from scipy import ndimage
     from scenes.reach import MIN_PARALLAX
     from verify.verdict.verdict import judging_grid
 
-    key = src + (f"_c{v.cos}" if v.cos else "")
+    key = src + (f"_c{v.cos}" if v.cos else "") + (f"_s{v.sigma}" if v.sigma else "")
     col, land, p = arr[f"{key}_col"], arr[f"{key}_land"], arr[f"{key}_par"]
-    photo = arr["photo"].astype(np.float64)
+    photo = arr[f"photo_b{v.blur}" if v.blur else "photo"].astype(np.float64)
     n = land.sum(0)
     judged = (n >= 2) & (p >= MIN_PARALLAX)
     drop = np.zeros_like(judged)
@@ -460,8 +492,8 @@ def score(arr, v: Variant, src: str = "truth") -> dict:
             lo, hi = arr["zmin"], arr["zmax"]
         else:
             lo = hi = np.where(np.isfinite(arr["zsgm"]), arr["zsgm"], np.inf)
-        lo = ndimage.minimum_filter(np.nan_to_num(lo, nan=np.inf), 3, mode="nearest")
-        hi = ndimage.maximum_filter(np.nan_to_num(hi, nan=np.inf), 3, mode="nearest")
+        lo = ndimage.minimum_filter(np.where(np.isnan(lo), np.inf, lo), 3, mode="nearest")
+        hi = ndimage.maximum_filter(np.where(np.isnan(hi), np.inf, hi), 3, mode="nearest")
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(np.isfinite(hi), hi / np.maximum(lo, 1e-6) - 1.0, np.inf)
         drop |= rel > v.edge
@@ -484,15 +516,41 @@ def score(arr, v: Variant, src: str = "truth") -> dict:
     mu_s = (sp * land[..., None]).sum(0) / np.maximum(n, 1)[..., None]
     spread = np.sqrt(((sp - mu_s[None]) ** 2 * land[..., None]).sum(0).mean(-1)
                      / np.maximum(n - 1, 1))
-    e = np.abs(photo - mu).mean(-1)
+    if v.resid == "chroma":
+        e = np.abs((photo - photo.mean(-1, keepdims=True))
+                   - (mu - mu.mean(-1, keepdims=True))).mean(-1)
+    else:
+        e = np.abs(photo - mu).mean(-1)
     z = e / (spread + v.s0)
     out = {"judged": float(judged.mean())}
+    if maps:
+        out.update(e_cells=np.where(judged, e, np.nan), z_cells=np.where(judged, z, np.nan),
+                   mu=mu)
     grid = judging_grid(arr["cell"].shape)
     for name, m in (("e", e), ("z", z)):
         px = np.where(judged, m, np.nan).ravel()[arr["cell"]]
         px[arr["totem_px"]] = np.nan
         out[name] = _patch_stat(px, grid, v.stat)
     return out
+
+
+def change(arr, src_arr, v: Variant) -> float:
+    """The edit's own size at the prediction's resolution: the worst patch (as
+    :func:`score`'s) of ``|photo - source photo|`` (sRGB, mean over channels, the photo
+    blurred as ``v`` says) over the cells the untouched source's oracle judges. A
+    prediction that reproduced the source photo exactly at this blur would score the
+    edit this and the untouched photo 0: the most any prediction at it can separate."""
+    from scenes.reach import MIN_PARALLAX
+    from verify.verdict.verdict import judging_grid
+    key = f"photo_b{v.blur}" if v.blur else "photo"
+    d = arr[key].astype(np.float64) - src_arr[key]
+    if v.resid == "chroma":
+        d = d - d.mean(-1, keepdims=True)
+    d = np.abs(d).mean(-1)
+    judged = (src_arr["truth_land"].sum(0) >= 2) & (src_arr["truth_par"] >= MIN_PARALLAX)
+    px = np.where(judged, d, np.nan).ravel()[arr["cell"]]
+    px[arr["totem_px"]] = np.nan
+    return _patch_stat(px, judging_grid(arr["cell"].shape), v.stat)
 
 
 KINDS = ("color", "splice", "inpaint", "remove")
@@ -534,6 +592,34 @@ def report(rows, variants, keys=("e", "z")) -> list[str]:
     return lines
 
 
+def _source_name(row, by_name):
+    """The untouched photo an edited one was made from (its name), or None."""
+    if row["kind"] == "none":
+        return None
+    src = row["name"]
+    for suffix in ("-" + row["kind"], "-color", "-splice", "-inpaint", "-remove"):
+        src = src.removesuffix(suffix)
+    return src if src in by_name else None
+
+
+def ceiling_lines(rows, variants) -> list[str]:
+    """Per variant, the median over each kind's edits of :func:`change` (the edit's
+    size at the prediction's resolution), per preset, beside the untouched photos'
+    median worst-patch ``e`` under that variant."""
+    lines = ["\nmedian worst-patch change (edit - source photo), sRGB; 'none': the "
+             "untouched photos' residual e"]
+    for v in variants:
+        lab = v.label()
+        lines.append(f"{lab}:" + " ".join(f"{p:>9s}" for p in ("all",) + PRESETS))
+        for kind in ("none",) + KINDS:
+            key = f"{lab}|e" if kind == "none" else f"{lab}|change"
+            vals = [np.nanmedian([r.get(key, np.nan) for r in rows if r["kind"] == kind
+                                  and preset in ("all", r["preset"])] or [np.nan])
+                    for preset in ("all",) + PRESETS]
+            lines.append(f"  {kind:8s}" + " ".join(f"{x:9.3f}" for x in vals))
+    return lines
+
+
 def per_preset(rows, v: Variant, key: str) -> list[str]:
     """Every kind's AUC per preset (against that preset's untouched photos) for one
     variant and residual."""
@@ -543,6 +629,25 @@ def per_preset(rows, v: Variant, key: str) -> list[str]:
         lines.append(f"  {kind:8s} " + " ".join(f"{t[kind, p]:8.2f}"
                                                   for p in ("all",) + PRESETS))
     return lines
+
+
+def _jpeg_cache(row, cache: Path, quality: int) -> Path:
+    """``cache/jpegQ/NAME.npz``: :func:`_photo_arrays` of the photo saved as a JPEG of
+    ``quality`` (made when missing)."""
+    path = cache / f"jpeg{quality}" / f"{row['name']}.npz"
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, **_photo_arrays(row["scene"], dict(np.load(row["path"])),
+                                                  jpeg=quality))
+    return path
+
+
+def _load(row) -> dict:
+    """A photo's cached arrays, its photo's from ``path_photo`` when given (JPEG)."""
+    arr = dict(np.load(row["path"]))
+    if row.get("path_photo"):
+        arr.update(np.load(row["path_photo"]))
+    return arr
 
 
 def run_variants(args) -> int:
@@ -556,21 +661,35 @@ def run_variants(args) -> int:
     rows = [r for r in cache_bench(args.bench, args.cache, names, args.slices, args.far)
             if r["kind"] in ("none",) + KINDS]
     variants = [Variant.parse(t) for t in (args.variant or ["baseline"])]
+    if args.jpeg:
+        for r in rows:
+            r["path_photo"] = _jpeg_cache(r, args.cache, args.jpeg)
     for r in rows:
-        arr = dict(np.load(r["path"]))
+        arr = _load(r)
         for v in variants:
             for k, x in score(arr, v, args.source).items():
                 r[f"{v.label()}|{k}"] = x
+    if args.ceiling:
+        by_name = {r["name"]: r for r in rows}
+        for r in rows:
+            src = _source_name(r, by_name)
+            if src is None:
+                continue
+            arr, sarr = _load(r), _load(by_name[src])
+            for v in variants:
+                r[f"{v.label()}|change"] = change(arr, sarr, v)
     n_none = sum(r["kind"] == "none" for r in rows)
     print(f"{len(rows)} photos ({n_none} untouched), seeds {args.seeds or 'all'}, "
           f"depth {args.source}")
     print("\n".join(report(rows, variants)))
+    if args.ceiling:
+        print("\n".join(ceiling_lines(rows, variants)))
     for v in variants[:args.detail]:
         for key in ("e", "z"):
             print("\n".join(per_preset(rows, v, key)))
     if args.out:
         with open(args.out, "w", newline="") as f:
-            keys = [k for k in rows[0] if k != "path"]
+            keys = [k for k in rows[0] if k not in ("path", "path_photo", "scene")]
             w = csv.DictWriter(f, keys, extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)
@@ -592,6 +711,11 @@ def main(argv=None) -> int:
     p.add_argument("--source", default="truth", choices=("truth", "sgm"))
     p.add_argument("--channels", action="store_true",
                    help="include channel copies (names with '+', e.g. +jpeg75)")
+    p.add_argument("--jpeg", type=int, default=None,
+                   help="compare the photo saved as a JPEG of this quality (the fit's "
+                        "totem rays unchanged)")
+    p.add_argument("--ceiling", action="store_true",
+                   help="also each edit's own size at the prediction's resolution")
     p.add_argument("--detail", type=int, default=1,
                    help="print the per-preset table of the first N variants")
     args = p.parse_args(argv)
