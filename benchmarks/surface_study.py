@@ -13,6 +13,18 @@ S0)``, on the cells where two totems land with a parallax of MIN_PARALLAX. The
 statistic is the worst patch of the verdict's grid (patches at least half judged).
 Prints one line a photo and, per depth source and residual, the AUC of each kind of edit
 against the untouched photos.
+
+    python benchmarks/surface_study.py BENCH --cache DIR [--seeds 31,32,33]
+        [--variant KEY=VALUE,...]... [--source truth|sgm] [--ceiling] [--jpeg 75]
+
+caches each photo's intermediate arrays in ``DIR/NAME.npz`` (:func:`cache_bench`, a few
+seconds a photo, once) and scores each :class:`Variant` of the oracle on them (a second
+a photo): the colour gains, what is left out (highlights, grazing rays, depth edges,
+cells outside the truth's reach), the splat and photo blur, the residual (colours or
+hues) and the patch statistic. Prints, per variant, the untouched and removed photos'
+median worst patch, the AUC of each kind pooled and per preset against the same
+preset's untouched photos; ``--ceiling`` each edit's own size at the prediction's
+resolution (:func:`change`); ``--jpeg`` the photo saved as a JPEG first.
 """
 
 from __future__ import annotations
@@ -689,7 +701,8 @@ def run_variants(args) -> int:
             print("\n".join(per_preset(rows, v, key)))
     if args.out:
         with open(args.out, "w", newline="") as f:
-            keys = [k for k in rows[0] if k not in ("path", "path_photo", "scene")]
+            keys = list(dict.fromkeys(k for r in rows for k in r
+                                      if k not in ("path", "path_photo", "scene")))
             w = csv.DictWriter(f, keys, extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)
