@@ -43,6 +43,21 @@ S0 = 0.02
 SOURCES = ("truth", "sgm", "fit")
 
 
+def _load_fit(sd: Path, fit_dir: Path, far: float):
+    """The scene's truth and folder, its fit, the fit's frame cut at ``far`` metres and
+    the totem rays the evidence reads (entering at COS_EVIDENCE or more)."""
+    from inverse.fit.files import load_fit
+    from inverse.grid import FrustumFrame
+    from scenes import folder
+    from verify.metrics import corroborate
+
+    truth, scene = folder.read_truth(sd), folder.read_scene(sd)
+    fit = load_fit(fit_dir)
+    frame = FrustumFrame.from_dict(fit.grid)
+    frame = dataclasses.replace(frame, far=min(frame.far, far))
+    return truth, scene, fit, frame, fit.rays.entering_at_least(corroborate.COS_EVIDENCE)
+
+
 def cell_depth(depth_px, frame, res):
     """(nt, ns) the median of a (H, W) depth map over each map cell (NaN where none)."""
     from inverse.grid import FrustumFrame  # noqa: F401
@@ -88,20 +103,14 @@ def sgm_depth(sc, par, min_parallax):
 
 
 def study(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
-    from inverse.fit.files import load_fit
-    from inverse.grid import FrustumFrame, cells_to_pixels
-    from scenes import folder
+    from inverse.grid import cells_to_pixels
     from scenes.colour import linear_to_srgb, srgb_to_linear
     from scenes.reach import MIN_PARALLAX
     from verify.metrics import corroborate, evidence, patches, resolution
     from verify.verdict.verdict import judging_grid
 
-    truth, scene = folder.read_truth(sd), folder.read_scene(sd)
-    fit = load_fit(fit_dir)
+    truth, scene, fit, frame, rays = _load_fit(sd, fit_dir, far)
     H, W = scene.image.shape[:2]
-    frame = FrustumFrame.from_dict(fit.grid)
-    frame = dataclasses.replace(frame, far=min(frame.far, far))
-    rays = fit.rays.entering_at_least(corroborate.COS_EVIDENCE)
     sc = corroborate.ray_slices(fit.rays, frame, n_slices=n_slices)
     res = sc.land.shape[2:]
     spacing = evidence.angular_spacing(rays.d, rays.totem, len(fit.centers))
@@ -236,18 +245,11 @@ def _fit_arrays(sd: Path, fit_dir: Path, n_slices: int, far: float) -> dict:
     the true depth's range over each cell ``zmin``, ``zmax`` (metres, inf for a
     backdrop), the pixel -> cell map ``cell`` (H, W), the rays' spacing ``spx`` (H, W,
     pixels) for the photo's blur, the frame's dict."""
-    from inverse.fit.files import load_fit
-    from inverse.grid import FrustumFrame
-    from scenes import folder
     from scenes.reach import MIN_PARALLAX
     from verify.metrics import corroborate, evidence, resolution
 
-    truth, scene = folder.read_truth(sd), folder.read_scene(sd)
-    fit = load_fit(fit_dir)
+    truth, scene, fit, frame, rays = _load_fit(sd, fit_dir, far)
     H, W = scene.image.shape[:2]
-    frame = FrustumFrame.from_dict(fit.grid)
-    frame = dataclasses.replace(frame, far=min(frame.far, far))
-    rays = fit.rays.entering_at_least(corroborate.COS_EVIDENCE)
     spacing = evidence.angular_spacing(rays.d, rays.totem, len(fit.centers))
     out = {}
     depth = np.where(truth.reach.backdrop, np.inf, truth.reach.depth.astype(np.float64))

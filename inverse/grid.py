@@ -29,7 +29,7 @@ from scenes.camera import project
 from scenes.errors import BadInput
 
 __all__ = ["FrustumFrame", "frame_for_scene", "resample", "stage_res", "stage_samples",
-           "cells_to_pixels"]
+           "cells_to_pixels", "cell_centres"]
 
 
 @dataclass(frozen=True)
@@ -160,6 +160,18 @@ def resample(values: np.ndarray, shape) -> np.ndarray:
     out = np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
                     for c in range(values.shape[3])], axis=-1)
     return out.astype(np.float32)
+
+
+def cell_centres(frame: FrustumFrame, res):
+    """Pixel coordinates (u, v) of the centres of an ``(nt, ns)`` map's cells over the
+    frame's ``(s, t)`` range, each (nt, ns)."""
+    nt, ns = res
+    du = frame.u_range[1] - frame.u_range[0]
+    dv = frame.v_range[1] - frame.v_range[0]
+    u = frame.u_range[0] + (np.arange(ns) + 0.5) / ns * du
+    v = frame.v_range[0] + (np.arange(nt) + 0.5) / nt * dv
+    vv, uu = np.meshgrid(v, u, indexing="ij")
+    return uu, vv
 
 
 def cells_to_pixels(cells, frame: FrustumFrame, size, *, nearest: bool = False) -> np.ndarray:

@@ -8,19 +8,16 @@ import numpy as np
 import pytest
 
 from inverse.rays import TotemRays
-from scenes import camera, refraction
+from scenes import camera
 from verify.metrics import agreement
+
+import glass_cases
 
 
 def test_a_ray_leaving_the_glass_is_put_back_on_its_pixel():
-    K = camera.intrinsics(320, 240, 60.0)
-    centers = np.array([[-0.3, 0.2, 1.5], [0.3, 0.25, 1.2]])
-    radius, ior = np.array([0.1, 0.08]), np.array([1.52, 1.45])
-    v, u = np.mgrid[0:240, 0:320]
-    d = camera.pixel_rays(K, u, v).reshape(-1, 3)
-    masks = np.stack([refraction.entry_cosine(d, c, r).reshape(240, 320) > 0.02
-                      for c, r in zip(centers, radius)])
-    ex = refraction.exit_rays(K, masks, centers, radius, ior)
+    K, centers, radius, ior = glass_cases.K, glass_cases.CENTERS, glass_cases.RADIUS, \
+        glass_cases.IOR
+    ex = glass_cases.two_spheres_exits(0.02)
     rays = TotemRays(ex.o.astype(np.float32), ex.d.astype(np.float32),      # as stored
                      np.zeros((len(ex.u), 3)), ex.totem, ex.cos_in)
     uv = agreement.ray_pixels(rays, centers, radius, ior, K)

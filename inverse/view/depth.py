@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from inverse.grid import FrustumFrame
+from inverse.grid import FrustumFrame, cell_centres
 from inverse.view.sweep import semi_global
 
 __all__ = ["EstablishedDepth", "established_depth", "plane_slice", "PRIOR", "TOL", "P1", "P2"]
@@ -61,12 +61,7 @@ def plane_slice(plane, frame: FrustumFrame, res, z) -> tuple[np.ndarray, np.ndar
     centre's camera ray: the nearest of the slices ``z`` (metres, (nk,)) in inverse depth,
     and the depth itself (metres); -1 and NaN where the ray misses it (above the
     horizon) or meets it outside the slices' range."""
-    nt, ns = res
-    du = frame.u_range[1] - frame.u_range[0]
-    dv = frame.v_range[1] - frame.v_range[0]
-    u = frame.u_range[0] + (np.arange(ns) + 0.5) / ns * du
-    v = frame.v_range[0] + (np.arange(nt) + 0.5) / nt * dv
-    vv, uu = np.meshgrid(v, u, indexing="ij")
+    uu, vv = cell_centres(frame, res)
     K = np.asarray(frame.K, np.float64)
     d = np.stack([(uu - K[0, 2]) / K[0, 0], (vv - K[1, 2]) / K[1, 1], np.ones_like(uu)], -1)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -53,7 +53,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from inverse.grid import FrustumFrame, cells_to_pixels
+from inverse.grid import FrustumFrame, cell_centres, cells_to_pixels
 from inverse.rays import TotemRays
 from inverse.view.sweep import slice_colours
 from scenes.colour import linear_to_srgb
@@ -85,17 +85,6 @@ def map_res(frame: FrustumFrame, cell_px: float = CELL_PX) -> tuple[int, int]:
     """(nt, ns) cells of about ``cell_px`` pixels over the frame's range."""
     return (max(2, round((frame.v_range[1] - frame.v_range[0]) / cell_px)),
             max(2, round((frame.u_range[1] - frame.u_range[0]) / cell_px)))
-
-
-def cell_centres(frame: FrustumFrame, res):
-    """Pixel coordinates (u, v) of the map's cell centres, each (nt, ns)."""
-    nt, ns = res
-    du = frame.u_range[1] - frame.u_range[0]
-    dv = frame.v_range[1] - frame.v_range[0]
-    u = frame.u_range[0] + (np.arange(ns) + 0.5) / ns * du
-    v = frame.v_range[0] + (np.arange(nt) + 0.5) / nt * dv
-    vv, uu = np.meshgrid(v, u, indexing="ij")
-    return uu, vv
 
 
 def _sample(image_c, uu, vv):

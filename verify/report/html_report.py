@@ -146,19 +146,28 @@ def region_picture(image: np.ndarray, protected: np.ndarray) -> np.ndarray:
     return out
 
 
+def _close_up_box(mask: np.ndarray):
+    """(y0, y1, x0, x1): the bounding box of ``mask`` (H, W) with a margin of 30 % of its
+    larger side (at least 4 px), inside the image; None for an empty mask."""
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return None
+    H, W = mask.shape
+    m = max(4, int(0.3 * max(np.ptp(rows), np.ptp(cols))))
+    return (max(0, rows.min() - m), min(H, rows.max() + m + 1),
+            max(0, cols.min() - m), min(W, cols.max() + m + 1))
+
+
 def totem_picture(image: np.ndarray, totem_mask: np.ndarray, silhouette: np.ndarray):
     """A close-up of one totem: the photo with the masks' outline and the fitted sphere's
     outline, (h, w, 3) sRGB, at most ``TOTEM_SIDE`` px; None when the sphere's image
     misses the photo. ``silhouette`` (H, W) bool, the fitted sphere's image."""
     from PIL import Image
 
-    rows, cols = np.nonzero(silhouette)
-    if rows.size == 0:
+    box = _close_up_box(silhouette)
+    if box is None:
         return None
-    H, W = silhouette.shape
-    m = max(4, int(0.3 * max(np.ptp(rows), np.ptp(cols))))
-    y0, y1 = max(0, rows.min() - m), min(H, rows.max() + m + 1)
-    x0, x1 = max(0, cols.min() - m), min(W, cols.max() + m + 1)
+    y0, y1, x0, x1 = box
     crop = _u8(np.asarray(image)[y0:y1, x0:x1])
     zoom = min(MAX_ZOOM, TOTEM_SIDE / max(crop.shape[:2]))
     size = (max(1, round(crop.shape[1] * zoom)), max(1, round(crop.shape[0] * zoom)))
@@ -179,13 +188,10 @@ def agreement_picture(image: np.ndarray, contrast: np.ndarray, mask: np.ndarray,
 
     from verify.metrics.patches import colorize
 
-    rows, cols = np.nonzero(mask)
-    if rows.size == 0:
+    box = _close_up_box(mask)
+    if box is None:
         return None
-    H, W = mask.shape
-    m = max(4, int(0.3 * max(np.ptp(rows), np.ptp(cols))))
-    y0, y1 = max(0, rows.min() - m), min(H, rows.max() + m + 1)
-    x0, x1 = max(0, cols.min() - m), min(W, cols.max() + m + 1)
+    y0, y1, x0, x1 = box
     img = np.asarray(image, np.float32)[y0:y1, x0:x1]
     grey = np.repeat((img @ np.array([0.299, 0.587, 0.114], np.float32))[..., None], 3, 2)
     c = np.asarray(contrast, np.float64)[y0:y1, x0:x1]
