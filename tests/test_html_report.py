@@ -262,6 +262,19 @@ def test_a_totem_close_up_draws_the_fitted_outline():
     assert html_report.totem_picture(texture(), moved, np.zeros_like(sil)) is None
 
 
+def test_the_depth_picture_tells_near_from_far_and_greys_the_unknown():
+    depth = np.full((H, W), 8.0)
+    depth[: H // 3] = np.nan                            # the totems establish no depth
+    depth[H // 2:, : W // 2] = 1.5                      # a near surface
+    pic, (near, far) = html_report.depth_picture(np.full((H, W, 3), 0.6), depth)
+    assert near == pytest.approx(1.5) and far == pytest.approx(8.0)
+    unknown, close, away = pic[H // 6, W // 2], pic[-2, 2], pic[-2, -2]
+    assert np.ptp(unknown) < 1e-6                       # grey
+    assert close[0] > close[2] + 0.3 and away[2] > away[0] + 0.3   # red near, blue far
+    assert html_report.depth_picture(np.zeros((H, W, 3)), np.full((H, W), np.nan)) == \
+        (None, None)
+
+
 def test_unpath_shortens_absolute_paths_only():
     assert html_report.unpath("bad key: /tmp/a/b/totems.json: radius") == \
         "bad key: totems.json: radius"

@@ -146,6 +146,28 @@ def region_picture(image: np.ndarray, protected: np.ndarray) -> np.ndarray:
     return out
 
 
+def depth_picture(image: np.ndarray, depth: np.ndarray):
+    """The depth the totems establish over the photo in grey: ``depth`` (H, W) metres,
+    NaN where none, coloured by inverse depth (turbo, red near, blue far, between its 2nd
+    and 98th percentiles). Returns the (H, W, 3) sRGB picture and (near, far) in metres,
+    or (None, None) where no pixel has a depth."""
+    from verify.metrics.patches import colorize
+
+    z = np.asarray(depth, np.float64)
+    has = np.isfinite(z) & (z > 0)
+    if not has.any():
+        return None, None
+    near, far = np.percentile(z[has], [2, 98])
+    inv = np.where(has, 1.0 / np.where(has, z, 1.0), 0.0)
+    t = (inv - 1.0 / far) / max(1.0 / near - 1.0 / far, 1e-12)
+    img = np.asarray(image, np.float32)
+    grey = np.repeat((img @ np.array([0.299, 0.587, 0.114], np.float32))[..., None], 3, 2)
+    out = 0.5 * grey
+    turbo = 0.12 + 0.83 * np.clip(t[has], 0.0, 1.0)      # its blue to its red, no ends
+    out[has] = 0.25 * grey[has] + 0.75 * colorize(turbo, 1.0)
+    return out, (float(near), float(far))
+
+
 def _close_up_box(mask: np.ndarray):
     """(y0, y1, x0, x1): the bounding box of ``mask`` (H, W) with a margin of 30 % of its
     larger side (at least 4 px), inside the image; None for an empty mask."""
@@ -394,6 +416,7 @@ def render_report(report: Report, overlays: dict) -> str:
         "protected": f"{100 * data['protected_fraction']:.0f}",
         "judged_uri": None if report.evidence is None else
         data_uri(region_picture(report.image, report.judged)),
+        **_depth_context(report),
         "judged": _fmt(None if data["judged_fraction"] is None
                        else 100 * data["judged_fraction"], ".0f"),
         "evidence": data["evidence"],
@@ -407,6 +430,16 @@ def render_report(report: Report, overlays: dict) -> str:
         "skipped": [(m, unpath(why)) for m, why in data["skipped"].items()],
     }
     return environment().get_template("report.html").render(**context)
+
+
+def _depth_context(report: Report) -> dict:
+    """The depth picture's data: URI and its range in words, or None."""
+    ev = report.evidence
+    pic, rng = (None, None) if ev is None or ev.depth is None else \
+        depth_picture(report.image, ev.depth)
+    return {"depth_uri": None if pic is None else data_uri(pic),
+            "depth_near": None if rng is None else _fmt(rng[0], ".2g"),
+            "depth_far": None if rng is None else _fmt(rng[1], ".2g")}
 
 
 def _css(rgb) -> str:
