@@ -12,7 +12,8 @@ leaves the totems untouched: the curve's naive end). Prints, per key level: the 
 those caught at the verdict's line (inconsistent, with the exact binomial 95 % interval
 of ``benchmarks/roc.py``), how (the statistic over the line, "photo"; a totem named by
 the totem check, "totem"), those unverifiable, the statistic's median and the fit's
-leave-one-totem-out L1 (``holdout``) median. ``--plot`` draws the share caught per level
+leave-one-totem-out L1 (``holdout``) median; then each scene's statistic per level beside
+its untouched photo's (found in the same benches). ``--plot`` draws the share caught per level
 with its interval. A failed run is left out and counted. Seconds.
 """
 
@@ -105,6 +106,28 @@ def table(runs: list[dict]) -> list[dict]:
     return out
 
 
+def per_scene(runs: list[dict], untouched: dict, rows: list[dict]) -> str:
+    """Each source scene's statistic at each level of ``rows`` (``table``'s), beside its
+    untouched photo's (``untouched``: name -> bench run), as markdown; a photo the verdict
+    called inconsistent is marked *, unverifiable (u)."""
+    def cell(r):
+        if r is None:
+            return "–"
+        mark = {"inconsistent": " *", "unverifiable": " (u)"}.get(r["verdict"], "")
+        return f"{r['statistic']:.2f}{mark}"
+
+    at = {(r["level"]["source"], (r["level"]["ior"], r["level"]["radius"],
+                                  r["level"]["pose"])): r for r in runs
+          if r.get("level") is not None}
+    sources = sorted({s for t in rows for s in t["sources"]})
+    lines = ["| scene | untouched | " + " | ".join(t["label"] for t in rows) + " |",
+             "|---|---|" + "---|" * len(rows)]
+    for src in sources:
+        lines.append(f"| {src} | {cell(untouched.get(src))} | "
+                     + " | ".join(cell(at.get((src, t["level"]))) for t in rows) + " |")
+    return "\n".join(lines)
+
+
 def markdown(rows: list[dict]) -> str:
     """The table as markdown."""
     lines = ["| key level | photos | caught at the line (95 % interval) | by the statistic "
@@ -160,11 +183,13 @@ def main(argv=None) -> int:
     p.add_argument("bench", nargs="+", type=Path)
     p.add_argument("--plot", type=Path, default=None)
     args = p.parse_args(argv)
-    runs = []
+    runs, untouched = [], {}
     for r in load_runs(args.bench):
         lv = level_of(r)
         if lv is not None:
             runs.append({**r, "level": lv})
+        elif r["kind"] == "none":
+            untouched[r["name"]] = r
     failed = sum(1 for d in args.bench
                  for r in json.loads((d / "bench.json").read_text())["runs"]
                  if r.get("mode") == "joint" and r.get("status") != "ok"
@@ -174,6 +199,8 @@ def main(argv=None) -> int:
         print("key_strength: no rekey runs in these benches", file=sys.stderr)
         return 2
     print(markdown(rows))
+    print("\nThe statistic per scene (* inconsistent, (u) unverifiable; the line at 1):\n")
+    print(per_scene(runs, untouched, rows))
     sources = sorted({s for t in rows for s in t["sources"]})
     print(f"\n{len(sources)} source scenes: {', '.join(sources)}"
           + (f"; {failed} rekey or remove runs failed and are left out" if failed else ""))

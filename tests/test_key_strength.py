@@ -100,4 +100,7 @@ def test_main_prints_the_table_and_draws_the_curve(bench, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "| index +0.05, radius +5 %, centres from the masks | 3 | 2 of 3 (9-99 %)" in out
     assert "1 rekey or remove runs failed" in out
+    # each scene's statistic per level beside its untouched photo's (a's: 0.2)
+    assert "| a | 0.20 | 0.40 | 0.70 * | 1.50 * | 0.30 |" in out
+    assert "| c | – | – | – | 0.90 (u) | – |" in out
     assert png.is_file() and png.stat().st_size > 1000
