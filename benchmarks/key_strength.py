@@ -142,8 +142,18 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def plot(rows: list[dict], path: Path) -> None:
-    """The share caught per level with its 95 % interval, levels by growing error."""
+def _tick(level: tuple) -> str:
+    ior, radius, pose = level
+    if pose == NO_KEY:
+        return "no key\n(totems\nuntouched)"
+    if ior == 0 and radius == 0:
+        return "key held" if pose == "exact" else "key,\ncentres from\nmasks"
+    return f"index {ior:+.2g}\nradius {100 * radius:+.2g} %"
+
+
+def plot(rows: list[dict], path: Path, runs=()) -> None:
+    """The share caught per level with its 95 % interval, levels by growing error; with
+    ``runs`` (``table``'s input), beside it each scene's statistic per level."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -152,26 +162,32 @@ def plot(rows: list[dict], path: Path) -> None:
     share = np.array([t["caught"] / t["n"] for t in rows])
     lo = np.array([t["lo"] for t in rows])
     hi = np.array([t["hi"] for t in rows])
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=100)
+    fig, axes = plt.subplots(1, 2 if runs else 1, figsize=(12 if runs else 7, 4.2),
+                             dpi=100, squeeze=False)
+    ax = axes[0, 0]
     ax.errorbar(x, share, yerr=[share - lo, hi - share], fmt="o", capsize=4, color="C0")
     for xi, t in zip(x, rows):
         ax.annotate(f"{t['caught']}/{t['n']}", (xi, t["caught"] / t["n"]),
                     textcoords="offset points", xytext=(8, -3), fontsize=8)
-    names = []
-    for t in rows:
-        ior, radius, pose = t["level"]
-        if pose == NO_KEY:
-            names.append("no key\n(totems\nuntouched)")
-        elif ior == 0 and radius == 0:
-            names.append("key held" if pose == "exact" else "key,\ncentres from\nmasks")
-        else:
-            names.append(f"index {ior:+.2g}\nradius {100 * radius:+.2g} %")
-    ax.set_xticks(x, names, fontsize=8)
     ax.set_ylim(-0.05, 1.05)
-    ax.set_xlim(-0.5, len(rows) - 0.5)
-    ax.set_ylabel("share caught at the verdict's line")
-    ax.set_title("the adaptive forger (rekey, remove) by its error in the key")
-    ax.grid(axis="y", color="0.9")
+    ax.set_ylabel("share caught at the verdict's line (95 % interval)")
+    ax.set_title("the adaptive forger's removals caught")
+    if runs:
+        at = {(r["level"]["source"], (r["level"]["ior"], r["level"]["radius"],
+                                      r["level"]["pose"])): r["statistic"] for r in runs
+              if r.get("level") is not None}
+        bx = axes[0, 1]
+        for k, src in enumerate(sorted({s for t in rows for s in t["sources"]})):
+            ys = [at.get((src, t["level"]), np.nan) for t in rows]
+            bx.plot(x, ys, "o-", color=f"C{k % 10}", lw=1, ms=4, label=src)
+        bx.axhline(1.0, color="0.3", lw=1, ls="--")
+        bx.set_ylabel("the verdict's statistic (the line at 1)")
+        bx.set_title("each scene's statistic")
+        bx.legend(fontsize=7, ncol=2)
+    for a in axes[0]:
+        a.set_xticks(x, [_tick(t["level"]) for t in rows], fontsize=8)
+        a.set_xlim(-0.5, len(rows) - 0.5)
+        a.grid(axis="y", color="0.9")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
@@ -205,7 +221,7 @@ def main(argv=None) -> int:
     print(f"\n{len(sources)} source scenes: {', '.join(sources)}"
           + (f"; {failed} rekey or remove runs failed and are left out" if failed else ""))
     if args.plot:
-        plot(rows, args.plot)
+        plot(rows, args.plot, runs)
         print(f"wrote {args.plot}")
     return 0
 
