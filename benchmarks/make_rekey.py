@@ -38,6 +38,7 @@ LEVELS = {
     "k2": "ior=0.02,radius=0.02",
     "k3": "ior=0.03,radius=0.03",
     "k5": "ior=0.05,radius=0.05",
+    "k10": "ior=0.1,radius=0.1",            # past issue 61's range: where does it rise?
 }
 """Level name -> ``--key-error``: one combined axis (index off by D, radius by D x 100 %,
 centres from the masks but at ``exact``)."""
