@@ -162,7 +162,7 @@ def plot(rows: list[dict], path: Path, runs=()) -> None:
     share = np.array([t["caught"] / t["n"] for t in rows])
     lo = np.array([t["lo"] for t in rows])
     hi = np.array([t["hi"] for t in rows])
-    fig, axes = plt.subplots(1, 2 if runs else 1, figsize=(12 if runs else 7, 4.2),
+    fig, axes = plt.subplots(1, 2 if runs else 1, figsize=(13.5 if runs else 7.5, 4.2),
                              dpi=100, squeeze=False)
     ax = axes[0, 0]
     ax.errorbar(x, share, yerr=[share - lo, hi - share], fmt="o", capsize=4, color="C0")
