@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from roc import load_runs  # noqa: E402
+from roc import load_runs, save_figure  # noqa: E402
 
 from verify.verdict.calibration import clopper_pearson  # noqa: E402
 
@@ -48,13 +48,18 @@ def level_of(run: dict) -> dict | None:
     return {**key, "source": rec["source"]["folder"]}
 
 
-def label(level: tuple) -> str:
-    """The words for a level ``(ior, radius, pose)``."""
+def label(level: tuple, *, short: bool = False) -> str:
+    """The words for a level ``(ior, radius, pose)``; ``short``: a figure's tick, over
+    lines."""
     ior, radius, pose = level
     if pose == NO_KEY:
-        return "no key (totems untouched)"
+        return "no key\n(totems\nuntouched)" if short else "no key (totems untouched)"
     if ior == 0 and radius == 0:
-        return "the key held" if pose == "exact" else "the key, centres from the masks"
+        if pose == "exact":
+            return "key held" if short else "the key held"
+        return "key,\ncentres from\nmasks" if short else "the key, centres from the masks"
+    if short:
+        return f"index {ior:+.2g}\nradius {100 * radius:+.2g} %"
     centres = "true outline" if pose == "exact" else "masks"
     return f"index {ior:+.3g}, radius {100 * radius:+.3g} %, centres from the {centres}"
 
@@ -142,15 +147,6 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _tick(level: tuple) -> str:
-    ior, radius, pose = level
-    if pose == NO_KEY:
-        return "no key\n(totems\nuntouched)"
-    if ior == 0 and radius == 0:
-        return "key held" if pose == "exact" else "key,\ncentres from\nmasks"
-    return f"index {ior:+.2g}\nradius {100 * radius:+.2g} %"
-
-
 def plot(rows: list[dict], path: Path, runs=()) -> None:
     """The share caught per level with its 95 % interval, levels by growing error; with
     ``runs`` (``table``'s input), beside it each scene's statistic per level."""
@@ -185,13 +181,10 @@ def plot(rows: list[dict], path: Path, runs=()) -> None:
         bx.set_title("each scene's statistic")
         bx.legend(fontsize=7, ncol=2)
     for a in axes[0]:
-        a.set_xticks(x, [_tick(t["level"]) for t in rows], fontsize=8)
+        a.set_xticks(x, [label(t["level"], short=True) for t in rows], fontsize=8)
         a.set_xlim(-0.5, len(rows) - 0.5)
         a.grid(axis="y", color="0.9")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> int:

@@ -324,6 +324,13 @@ def plot(rows: list[dict], path: Path) -> None:
     ax.set(xlabel=f"false alarms (untouched, {len(neg)} photos)", ylabel="caught",
            title="image-level ROC of the verdict's statistic")
     ax.legend(loc="lower right", fontsize=8)
+    save_figure(fig, path)
+
+
+def save_figure(fig, path: Path) -> None:
+    """Write a matplotlib figure to ``path`` (its folder made) and close it."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
