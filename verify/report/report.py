@@ -88,10 +88,10 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     judging = verdict_mod.judging_grid((H, W))         # the verdict's, the whole photo
     seen = protected & ~totem_mask
     rays = getattr(fit, "rays", None)    # None: a fit from before they were kept
-    slices = None if rays is None else corroborate.ray_slices(
-        rays, FrustumFrame.from_dict(fit.grid))
+    frame = None if rays is None else FrustumFrame.from_dict(fit.grid)
+    slices = None if rays is None else corroborate.ray_slices(rays, frame)
     ev = None if rays is None else evidence.evidence_map(
-        rays, fit.centers, FrustumFrame.from_dict(fit.grid), (W, H), slices=slices,
+        rays, fit.centers, frame, (W, H), slices=slices,
         plane=evidence.support_plane(getattr(fit, "geometry", None)))
     # each metric judges the protected pixels where its evidence holds (sRGB [0, 1]),
     # where a patch of the verdict's grid can judge them
@@ -114,22 +114,13 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
     judged_fraction = float(judged.sum() / max((~totem_mask).sum(), 1))
     holdout = fit_holdout(fit)
     agree = None if rays is None else agreement.totem_agreement(
-        rays, fit.centers, scene.radius, scene.ior, scene.K,
-        FrustumFrame.from_dict(fit.grid), image, scene.masks)
+        rays, fit.centers, scene.radius, scene.ior, scene.K, frame, image, scene.masks)
     decision = verdict_mod.decide(inside, cover, judging, thresholds=thresholds,
                                   calibration=calibration, judged_fraction=judged_fraction,
                                   holdout=holdout,
                                   totem_lead=None if agree is None else agree.lead)
 
-    metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
-               "recon_L1": None, "pose_L1": None, "manip_judged": None}
-    if scene.manip_mask is not None:
-        manip = np.asarray(scene.manip_mask, bool)
-        metrics["manip_judged"] = float((manip & judged).sum() / manip.sum()) \
-            if manip.any() else None
-        labels = patches.patch_labels(scene.manip_mask, grid)
-        for name in heat:
-            metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
+    metrics = edit_metrics(scene.manip_mask, heat, grid, keep, judged)
     metrics.update(truth_metrics(truth, fitted=fitted, centers=fit.centers, seen=seen,
                                  judged=judged, totem_mask=totem_mask,
                                  manip=scene.manip_mask,
@@ -154,6 +145,23 @@ def verify_scene(scene: folder.Scene, fit, *, truth: folder.Truth | None = None,
         scene_name=Path(scene.path).resolve().name, scale=getattr(scene, "scale", 1),
         judged=judged, judged_fraction=judged_fraction, evidence=ev, tone=tone_found,
         holdout=holdout, judging=judging, agreement=agree)
+
+
+def edit_metrics(manip_mask, heat: dict, grid, keep, judged) -> dict:
+    """The metrics read off ``manip_mask.png`` (None without it): each heatmap's patch
+    AP against the edited patches (``keep`` the patches scored), the share of the edit
+    judged; ``recon_L1`` and ``pose_L1`` None until the truth fills them."""
+    metrics = {**{f"patch_ap_{name}": None for name in patches.METRICS},
+               "recon_L1": None, "pose_L1": None, "manip_judged": None}
+    if manip_mask is None:
+        return metrics
+    manip = np.asarray(manip_mask, bool)
+    metrics["manip_judged"] = float((manip & judged).sum() / manip.sum()) \
+        if manip.any() else None
+    labels = patches.patch_labels(manip_mask, grid)
+    for name in heat:
+        metrics[f"patch_ap_{name}"] = patches.patch_ap(heat[name], labels, keep)
+    return metrics
 
 
 def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
