@@ -17,6 +17,7 @@ from scenes.errors import BadInput
 from verify.batch.batch import Engine
 from verify.batch.bench import describe_scene, plan
 from verify.batch.runs import Run, run_all
+from verify.verdict.verdict import totems_disagree
 
 __all__ = ["EXIT_OK", "EXIT_INCONSISTENT", "EXIT_FAILED", "EXIT_UNVERIFIABLE",
            "scene_folders", "unique_names", "photo_line", "index_entry", "render_index", "check_many", "from_args"]
@@ -68,9 +69,7 @@ def photo_line(record: dict) -> str:
     named = (record.get("totem_check") or {}).get("named") or []
     return (f"{name}: {record['verdict']}, score {record['score']:.2f} of "
             f"{record['threshold']:.2f}" + ("" if p is None else f", p = {p:.2g}")
-            + ("" if not named else "; {} from the left disagree{} with the other totems"
-               .format(" and ".join(f"totem {j + 1}" for j in named),
-                       "s" * (len(named) == 1)))
+            + ("" if not named else f"; {totems_disagree(named)}")
             + (f"; fit of {record['fit_from']}" if record.get("fit_from") else "")
             + (" (resumed)" if record.get("resumed") else ""))
 

@@ -296,6 +296,8 @@ def cmd_plan(args) -> dict:
 
 
 def _print_summary(verb: str, summary: dict) -> None:
+    from verify.verdict.verdict import totems_disagree
+
     if "verdict" in summary:
         m = summary.get("metrics", {})
         extras = ", ".join(f"{k} {v:.3f}" for k, v in m.items() if v is not None)
@@ -310,8 +312,7 @@ def _print_summary(verb: str, summary: dict) -> None:
             .format(**summary["holdout"]))
         named = (summary.get("totem_check") or {}).get("named") or []
         if named and summary["verdict"] == "inconsistent":
-            why += " ({} from the left disagree{} with the other totems)".format(
-                " and ".join(f"totem {j + 1}" for j in named), "s" * (len(named) == 1))
+            why += f" ({totems_disagree(named)})"
         print(f"{summary['verdict']}{why}: {odds}score {summary['score']:.2f} of "
               f"{summary['threshold']:.2f} ({each}); "
               f"protected {100 * summary['protected_fraction']:.0f}% of the photo"

@@ -60,7 +60,7 @@ __all__ = ["RANGE_THRESHOLD", "UNSEEN_THRESHOLD", "ABSENT_THRESHOLD", "THRESHOLD
            "TOP_K_FRACTION", "TOP_K_MIN", "MIN_COVER", "MAX_DRIVERS", "MIN_JUDGED",
            "MAX_HOLDOUT", "RANGE_MIN_PARALLAX", "TOTEM_LEAD", "Verdict",
            "judging_grid", "top_k", "metric_score", "judgeable", "decide", "name_drivers",
-           "name_totems"]
+           "name_totems", "totems_disagree"]
 
 RANGE_THRESHOLD = 0.318
 """RANGE score (mean of the worst patches' :func:`verify.metrics.patches.range_distance`
@@ -252,6 +252,16 @@ def name_totems(lead, line: float = TOTEM_LEAD) -> list[int]:
         return []
     lead = np.asarray(lead, np.float64)
     return [int(j) for j in np.nonzero(np.nan_to_num(lead, nan=-np.inf) > line)[0]]
+
+
+def totems_disagree(named) -> str:
+    """The named totems in words, counted from the left from 1 ("totem 2 and totem 3
+    from the left disagree with the other totems"); "" when none is named."""
+    named = list(named or [])
+    if not named:
+        return ""
+    return "{} from the left disagree{} with the other totems".format(
+        " and ".join(f"totem {j + 1}" for j in named), "s" * (len(named) == 1))
 
 
 def decide(patch_scores: dict, cover, grid, *, thresholds: dict | None = None,
