@@ -51,9 +51,7 @@ def refract_sphere(d, P, R: float, eta: float):
     D = (b - h)[:, None] * d                    # entry point
     N1 = (D - P) / R                            # outward normal at D (faces the ray)
     cos_i = np.clip(-(d * N1).sum(1), 0.0, 1.0)
-    r = 1.0 / eta
-    cos_t = np.sqrt(np.maximum(1.0 - r * r * (1.0 - cos_i ** 2), 0.0))
-    d_mid = r * d + (r * cos_i - cos_t)[:, None] * N1
+    d_mid, cos_t = _into_glass(d, N1, eta)
     E = D + (2.0 * R * cos_t)[:, None] * d_mid  # chord of length 2 R cos_t
     N2 = (E - P) / R                            # outward; -N2 faces the ray inside
     # inside to outside: r = eta, c = d_mid . N2 = cos_t, the exit angle equals cos_i
@@ -90,12 +88,19 @@ def entry_points(E, d_out, P, R, eta) -> np.ndarray:
     E = P + R[..., None] * N if R.ndim else P + R * N
     # backwards, the ray arrives along -d_out and enters the glass at E (air to glass);
     # the outward normal faces it, its incidence cosine that of the forward exit
-    c = np.clip((d * N).sum(-1), 0.0, 1.0)
-    r = 1.0 / eta
-    cos_t = np.sqrt(np.maximum(1.0 - r * r * (1.0 - c * c), 0.0))
-    back = -r[..., None] * d if r.ndim else -r * d
-    back = back + (r * c - cos_t)[..., None] * N
+    back, cos_t = _into_glass(-d, N, eta)
     return E + (2.0 * R * cos_t)[..., None] * back      # the chord back to the entry
+
+
+def _into_glass(d, N, eta):
+    """Snell's law from air into glass: unit rays ``d`` (m, 3) meeting the surface whose
+    outward normal ``N`` (m, 3) faces them; ``eta`` = n_glass / n_air, scalar or (m,).
+    Returns the refracted unit directions (m, 3) and the cosines of refraction (m,)."""
+    c = np.clip(-(d * N).sum(-1), 0.0, 1.0)
+    r = 1.0 / np.asarray(eta, np.float64)
+    cos_t = np.sqrt(np.maximum(1.0 - r * r * (1.0 - c * c), 0.0))
+    rr = r[..., None] if r.ndim else r
+    return rr * d + (r * c - cos_t)[..., None] * N, cos_t
 
 
 def entry_cosine(d, P, R: float) -> np.ndarray:
