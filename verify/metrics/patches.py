@@ -61,7 +61,7 @@ __all__ = ["GRID", "PATCH_PX", "MIN_PATCH_PX", "NERF_L1_SCALE", "MANIP_FRACTION"
            "METRICS", "PatchGrid", "patch_grid", "patch_fraction", "patch_means",
            "patch_top_means", "patch_scores", "pixel_errors", "chroma",
            "chroma_distance", "range_distance", "outside_range", "heatmaps",
-           "patch_labels", "patch_ap", "to_pixels", "colorize", "heatmap_vis",
+           "patch_labels", "patch_ap", "to_pixels", "luma", "colorize", "heatmap_vis",
            "heatmap_overlay"]
 
 GRID = 30
@@ -406,6 +406,13 @@ def _linear(q: np.ndarray, c: np.ndarray):
     return i0, i1, np.clip(w, 0.0, 1.0)
 
 
+def luma(image) -> np.ndarray:
+    """(H, W) float32 grey level of an sRGB image (H, W, 3) (Rec. 601 weights): the
+    pictures' grey under their colours."""
+    return np.asarray(image, dtype=np.float32) @ np.array([0.299, 0.587, 0.114],
+                                                          dtype=np.float32)
+
+
 def colorize(values: np.ndarray, vmax: float, cmap: str = "turbo") -> np.ndarray:
     """Map ``values`` in [0, vmax] through a matplotlib colour map, (..., 3) sRGB [0, 1]."""
     import matplotlib
@@ -437,8 +444,7 @@ def heatmap_overlay(image: np.ndarray, heat: np.ndarray, grid: PatchGrid,
     (H, W, 3) sRGB [0, 1]. Outside the protected region, below the patch grid and on the
     totems the photo is grey and dimmed.
     """
-    image = np.asarray(image, dtype=np.float32)
-    grey = image @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    grey = luma(image)
     out = np.repeat(grey[..., None] * dim, 3, axis=2)
     yv = grid.y_valid
     colour = heatmap_vis(heat, grid, vmax)

@@ -151,7 +151,7 @@ def depth_picture(image: np.ndarray, depth: np.ndarray):
     NaN where none, coloured by inverse depth (turbo, red near, blue far, between its 2nd
     and 98th percentiles). Returns the (H, W, 3) sRGB picture and (near, far) in metres,
     or (None, None) where no pixel has a depth."""
-    from verify.metrics.patches import colorize
+    from verify.metrics.patches import colorize, luma
 
     z = np.asarray(depth, np.float64)
     has = np.isfinite(z) & (z > 0)
@@ -160,8 +160,7 @@ def depth_picture(image: np.ndarray, depth: np.ndarray):
     near, far = np.percentile(z[has], [2, 98])
     inv = np.where(has, 1.0 / np.where(has, z, 1.0), 0.0)
     t = (inv - 1.0 / far) / max(1.0 / near - 1.0 / far, 1e-12)
-    img = np.asarray(image, np.float32)
-    grey = np.repeat((img @ np.array([0.299, 0.587, 0.114], np.float32))[..., None], 3, 2)
+    grey = np.repeat(luma(image)[..., None], 3, 2)
     out = 0.5 * grey
     turbo = 0.12 + 0.83 * np.clip(t[has], 0.0, 1.0)      # its blue to its red, no ends
     out[has] = 0.25 * grey[has] + 0.75 * colorize(turbo, 1.0)
@@ -208,14 +207,13 @@ def agreement_picture(image: np.ndarray, contrast: np.ndarray, mask: np.ndarray,
     3) sRGB at most ``TOTEM_SIDE`` px; None for an empty mask."""
     from PIL import Image
 
-    from verify.metrics.patches import colorize
+    from verify.metrics.patches import colorize, luma
 
     box = _close_up_box(mask)
     if box is None:
         return None
     y0, y1, x0, x1 = box
-    img = np.asarray(image, np.float32)[y0:y1, x0:x1]
-    grey = np.repeat((img @ np.array([0.299, 0.587, 0.114], np.float32))[..., None], 3, 2)
+    grey = np.repeat(luma(np.asarray(image)[y0:y1, x0:x1])[..., None], 3, 2)
     c = np.asarray(contrast, np.float64)[y0:y1, x0:x1]
     seen = np.isfinite(c)
     crop = 0.6 * grey
@@ -359,7 +357,7 @@ def _agreement(report: Report, data: dict) -> dict | None:
     check, a = data.get("totem_check"), report.agreement
     if check is None or a is None:
         return None
-    masks = None if report.silhouettes is None else report.silhouettes
+    masks = report.silhouettes
     vmax = 1.5 * check["line"]
     rows = []
     for t in check["totems"]:
