@@ -61,11 +61,7 @@ def plane_slice(plane, frame: FrustumFrame, res, z) -> tuple[np.ndarray, np.ndar
     centre's camera ray: the nearest of the slices ``z`` (metres, (nk,)) in inverse depth,
     and the depth itself (metres); -1 and NaN where the ray misses it (above the
     horizon) or meets it outside the slices' range."""
-    uu, vv = cell_centres(frame, res)
-    K = np.asarray(frame.K, np.float64)
-    d = np.stack([(uu - K[0, 2]) / K[0, 0], (vv - K[1, 2]) / K[1, 1], np.ones_like(uu)], -1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        zp = float(plane.offset) / (d @ np.asarray(plane.normal, np.float64))
+    zp = plane.pixel_depth(frame.K, *cell_centres(frame, res))
     z = np.asarray(z, np.float64)
     inside = np.isfinite(zp) & (zp >= z.min()) & (zp <= z.max())
     inv = 1.0 / np.where(inside, zp, 1.0)

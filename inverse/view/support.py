@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.camera import pixel_rays
+
 __all__ = ["SupportPlane", "plane_from_centres", "ray_plane", "plane_view", "MAX_RESIDUAL",
            "COS_VIEW"]
 
@@ -74,6 +76,19 @@ class SupportPlane:
         """Distance along the camera rays ``d`` (m, 3) to the plane (m,), metres; inf
         where the ray does not meet it in front of the camera."""
         return ray_plane(np.zeros(3), d, self.normal, self.offset)
+
+    def pixel_depth(self, K, u, v) -> np.ndarray:
+        """Camera-frame ``z`` (metres) where the rays through pixels ``u``, ``v`` (any
+        shape; OpenCV centres) meet the plane; inf where they do not, in front."""
+        d = pixel_rays(K, u, v)
+        t = self.depth(d.reshape(-1, 3)).reshape(d.shape[:-1])
+        return t * d[..., 2]
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SupportPlane":
+        """The plane from :meth:`to_dict`'s numbers (``fit.json`` ``geometry.support``)."""
+        return cls(np.asarray(d["normal"], np.float64), float(d["offset"]),
+                   float(d.get("residual", 0.0)))
 
 
 def ray_plane(o, d, normal, offset) -> np.ndarray:

@@ -152,10 +152,7 @@ def support_plane(geometry: dict | None) -> SupportPlane | None:
     """The support plane a fit took its resting totems to touch (``fit.json``
     ``geometry.support``: ``totems fit --resting``), or None."""
     sp = (geometry or {}).get("support")
-    if not sp:
-        return None
-    return SupportPlane(np.asarray(sp["normal"], np.float64), float(sp["offset"]),
-                        float(sp.get("residual", 0.0)))
+    return SupportPlane.from_dict(sp) if sp else None
 
 
 def _depth(sc, par, var, frame, size, resolved, min_parallax, agree, plane):
@@ -170,17 +167,8 @@ def _depth(sc, par, var, frame, size, resolved, min_parallax, agree, plane):
     if plane is not None:
         on = cells_to_pixels(est.on_plane.astype(np.float64), frame, (W, H),
                              nearest=True) > 0.5
-        zp = plane.depth(_pixel_directions(frame.K, (W, H)))
-        zp = np.where(np.isfinite(zp), zp, np.nan).reshape(H, W)
+        v, u = np.mgrid[0:H, 0:W]
+        zp = plane.pixel_depth(frame.K, u, v)
         out[0] = np.where(on & np.isfinite(zp), zp, out[0])
     return tuple(np.where(resolved, a, np.nan).astype(np.float32) for a in out)
 
-
-def _pixel_directions(K, size):
-    """(H*W, 3) camera-frame directions with ``z = 1`` through every pixel centre
-    (OpenCV convention)."""
-    W, H = size
-    K = np.asarray(K, np.float64)
-    u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
-    return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1],
-                     np.ones_like(u)], -1).reshape(-1, 3)
