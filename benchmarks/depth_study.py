@@ -58,24 +58,12 @@ def _refine(cost, k, z):
     return 1.0 / (inv[k] + np.clip(off, -0.5, 0.5) * step[k])
 
 
-def plane_depth(plane, K, size) -> np.ndarray:
-    """(H, W) camera-frame depth (metres) where each pixel's ray meets ``plane``
-    (a :class:`~inverse.view.support.SupportPlane`), NaN where it does not (behind the
-    camera or parallel); ``size`` (W, H), OpenCV pixel centres."""
-    W, H = size
-    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
-    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = plane.offset / (d @ plane.normal)
-    return np.where(np.isfinite(z) & (z > 0), z, np.nan)
-
-
 def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None,
                resting: bool = False, snap: float = 0.2, prior: float = 0.5) -> dict:
     """Each candidate's (H, W) depth map (NaN where it gives none), metres; the sweep
     over ``n_slices`` slices to ``far`` metres (default the fit's frame's); with
     ``resting``, the support plane's and SGM snapped to it within ``snap`` (relative)."""
-    from inverse.grid import FrustumFrame, cells_to_pixels
+    from inverse.grid import FrustumFrame, cell_centres, cells_to_pixels
     from inverse.view.sweep import semi_global
     from scenes.reach import MIN_PARALLAX
     from verify.metrics import corroborate, evidence
@@ -112,16 +100,13 @@ def candidates(fit, scene, *, n_slices: int = 64, far: float | None = None,
         from inverse.view.support import plane_from_centres
         plane = plane_from_centres(fit.centers, scene.radius)
         if plane is not None:
-            zp = plane_depth(plane, np.asarray(scene.K, float), (W, H))
+            v, u = np.mgrid[0:H, 0:W]
+            zp = plane.pixel_depth(scene.K, u, v)
+            zp = np.where(np.isfinite(zp), zp, np.nan)
             out["plane"] = zp
             near = np.abs(out["sgm"] - zp) <= snap * zp
             out["sgm+plane"] = np.where(near, zp, out["sgm"])
-            from verify.metrics.corroborate import cell_centres
-            uu, vv = cell_centres(frame, cost.shape[1:])
-            d = np.stack([(uu - scene.K[0][2]) / scene.K[0][0],
-                          (vv - scene.K[1][2]) / scene.K[1][1], np.ones_like(uu)], -1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                zc = plane.offset / (d @ plane.normal)
+            zc = plane.pixel_depth(scene.K, *cell_centres(frame, cost.shape[1:]))
             inv = 1.0 / z
             kp = np.argmin(np.abs(inv[:, None, None] - 1.0 / np.where(zc > 0, zc, np.inf)),
                            axis=0)
