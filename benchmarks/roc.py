@@ -278,7 +278,8 @@ def by_coverage(edited: list[dict], key: str = "manip_judged",
 
 
 REACH_FIGURES = ("reach_fraction", "reach_judged", "judged_seen", "depth_error",
-                 "totem_depth_error", "totem_depth_given", "totem_depth_within")
+                 "totem_depth_error", "totem_depth_given", "totem_depth_within",
+                 "totem_depth_bound")
 
 
 def by_reach(rows: list[dict]) -> list[str]:
@@ -286,8 +287,9 @@ def by_reach(rows: list[dict]) -> list[str]:
     them) of what the truth's reach says of the evidence map: the reach's share of the
     photo, the share of it judged, the share of the judged that two totems truly see,
     the view's median relative depth error over it, and the same of the depth the totems
-    establish, the share of the reach it is given on and the share of those whose true
-    depth lies in its interval (``verify.metrics.truth``)."""
+    establish, the share of the reach it is given on, the share of those whose true
+    depth lies in its interval, and the precision the rays' spacing allows there
+    (``verify.metrics.truth``)."""
     by = defaultdict(list)
     for r in rows:
         if (r.get("metrics") or {}).get("reach_fraction") is not None:

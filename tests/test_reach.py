@@ -178,6 +178,31 @@ def test_truth_metrics_count_the_reach_from_both_sides():
     assert m["recon_L1"] == 0.0 and m["pose_L1"] == 0.0
 
 
+def test_the_depth_bound_is_the_reach_s_median_inverse_parallax_backdrop_left_out():
+    from verify.metrics.truth import truth_metrics
+
+    cols = np.arange(W)[None, :].repeat(H, 0)
+    n = np.full((H, W), 2, np.uint8)
+    parallax = np.where(cols < W // 3, 5.0, 20.0).astype(np.float32)   # a third near
+    backdrop = cols >= 3 * W // 4                  # a far backdrop: parallax 0, in reach
+    parallax[backdrop] = 0.0
+    reach = Reach(depth=np.full((H, W), 3.0, np.float32), n_totems=n, parallax=parallax,
+                  backdrop=backdrop, excluded=np.zeros((H, W), bool),
+                  spacing=np.array([0.03, 0.03]))
+    truth = folder.Truth(clean=np.zeros((H, W, 3)), totem_pose=np.stack([P1, P2]),
+                         scene={}, reach=reach)
+    m = truth_metrics(truth, fitted=np.zeros((H, W, 3)), centers=np.stack([P1, P2]),
+                      seen=np.ones((H, W), bool), judged=np.ones((H, W), bool),
+                      totem_mask=np.zeros((H, W), bool))
+    # the reach off the backdrop: W // 3 columns at 1/5, the rest of 3 W / 4 at 1/20
+    assert m["totem_depth_bound"] == pytest.approx(1 / 20)
+    parallax[:, : W // 2] = 5.0                    # now two thirds of it at 1/5
+    assert truth_metrics(truth, fitted=np.zeros((H, W, 3)), centers=np.stack([P1, P2]),
+                         seen=np.ones((H, W), bool), judged=np.ones((H, W), bool),
+                         totem_mask=np.zeros((H, W), bool))["totem_depth_bound"] == \
+        pytest.approx(1 / 5)
+
+
 @pytest.mark.slow
 def test_scene_make_writes_the_reach_and_scene_reach_writes_it_again(tmp_path):
     from scenes.synthetic.make import make_scene

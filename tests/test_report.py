@@ -66,7 +66,8 @@ def test_report_json_has_the_contract_fields_and_no_key(tmp_path):
                                     "pose_L1", "manip_judged", "reach_fraction",
                                     "reach_judged", "judged_seen", "manip_in_reach",
                                     "depth_error", "totem_depth_error",
-                                    "totem_depth_given", "totem_depth_within"}
+                                    "totem_depth_given", "totem_depth_within",
+                                    "totem_depth_bound"}
     assert data["metrics"]["reach_judged"] is None          # no truth/reach.npz
     # pose_L1 = mean over totems of sum |dP|: (0.01 + 0.03) / 2
     assert data["metrics"]["pose_L1"] == pytest.approx(0.02, abs=1e-6)
@@ -116,7 +117,8 @@ def test_metrics_are_null_without_ground_truth():
                                        "reach_judged": None, "judged_seen": None,
                                        "manip_in_reach": None, "depth_error": None,
                                        "totem_depth_error": None, "totem_depth_given": None,
-                                       "totem_depth_within": None}
+                                       "totem_depth_within": None,
+                                       "totem_depth_bound": None}
     assert rep.to_json()["totems"][0]["mask_iou"] > 0.98     # true centres, true masks
 
 

@@ -128,7 +128,7 @@ def test_edits_caught_by_the_share_in_the_truths_reach_and_the_reach_by_preset()
     cells = remove.split(" | ")[1:]
     assert cells[0].startswith("0 of 1") and cells[2].startswith("1 of 2")
     rows = roc.by_reach(edited + [run(None, "consistent", "envmap")])
-    assert rows[0].split(" | ")[2:] == list(roc.REACH_FIGURES[:-1]) + ["totem_depth_within |"]
+    assert rows[0].split(" | ")[2:] == list(roc.REACH_FIGURES[:-1]) + ["totem_depth_bound |"]
     box = next(r for r in rows if r.startswith("| box floating"))
     assert box.split(" | ")[1:4] == ["3", "0.60", "0.70"]   # photos, medians
     assert roc.by_reach([{"kind": "none", "metrics": {}}]) == []

@@ -19,7 +19,7 @@ __all__ = ["TRUTH_METRICS", "truth_metrics"]
 
 TRUTH_METRICS = ("recon_L1", "pose_L1", "reach_fraction", "reach_judged", "judged_seen",
                  "manip_in_reach", "depth_error", "totem_depth_error", "totem_depth_given",
-                 "totem_depth_within")
+                 "totem_depth_within", "totem_depth_bound")
 """report.json's metrics read off the truth (null where the truth does not hold them)."""
 
 
@@ -58,7 +58,10 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
     backdrop's pixels left out); ``totem_depth_error`` the same of the totems' depth
     over the reach's pixels where it is given, ``totem_depth_given`` the share of the
     reach (backdrop left out) where it is, ``totem_depth_within`` the share of those
-    whose true depth lies inside its interval.
+    whose true depth lies inside its interval; ``totem_depth_bound`` the median over the
+    reach (backdrop left out) of ``1 / parallax``: two totems' rays one angular spacing
+    apart fix a depth to about that share of itself, the precision the rays' spacing
+    allows without matching finer than a ray (:mod:`verify.metrics.evidence`).
     """
     out = dict.fromkeys(TRUTH_METRICS)
     if truth is None:
@@ -88,9 +91,11 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
         if at.any():
             err = np.abs(np.asarray(depth, np.float64)[at] - z_true[at]) / z_true[at]
             out["depth_error"] = float(np.median(err))
+    z_true = reach.depth.astype(np.float64)
+    area = inside & ~reach.backdrop & np.isfinite(z_true)
+    if area.any():
+        out["totem_depth_bound"] = float(np.median(1.0 / reach.parallax[area]))
     if totem_depth is not None and np.shape(totem_depth[0]) == image_shape:
-        z_true = reach.depth.astype(np.float64)
-        area = inside & ~reach.backdrop & np.isfinite(z_true)
         z, lo, hi = (np.asarray(a, np.float64) for a in totem_depth)
         at = area & np.isfinite(z)
         out["totem_depth_given"] = _share(at, area)
