@@ -118,3 +118,24 @@ def test_two_totems_cannot_tell(rays):
     A = absence(totem_rays.select(totem_rays.totem < 2), frame, camera_view(False),
                 np.zeros((H, W), bool), K, None, cell_px=CELL)
     assert np.isnan(A).all()
+
+
+def test_only_the_points_inside_the_established_interval_are_judged(rays):
+    # The totems establish the card's plane at 2.9-3.1 m: the removed card is found
+    # there. An interval at 1.4-1.6 m (the totems agree on a surface in front) leaves
+    # the card's depth unjudged, and where no interval is given nothing is judged.
+    card = card_pixels()
+    photo = camera_view(False)
+    none = np.zeros((H, W), bool)
+    full = np.ones((H, W))
+    at = absence(*rays, photo, none, K, None, cell_px=CELL, n_slices=48,
+                 interval=(2.9 * full, 3.1 * full))
+    free = absence(*rays, photo, none, K, None, cell_px=CELL, n_slices=48)
+    assert np.nanmedian(at[card]) == pytest.approx(np.nanmedian(free[card]), rel=0.2)
+    near = absence(*rays, photo, none, K, None, cell_px=CELL, n_slices=48,
+                   interval=(1.4 * full, 1.6 * full))
+    judged = near[card][np.isfinite(near[card])]       # few points there, if any
+    assert judged.size < 0.1 * card.sum() or np.median(judged) < 0.25 * np.nanmedian(at[card])
+    unknown = absence(*rays, photo, none, K, None, cell_px=CELL, n_slices=48,
+                      interval=(np.full((H, W), np.nan), np.full((H, W), np.nan)))
+    assert np.isnan(unknown).all()

@@ -76,3 +76,27 @@ def test_the_planes_slice_is_where_each_cell_ray_meets_it():
     assert (k[~met] == -1).all()
     inv = 1.0 / Z
     assert (np.abs(inv[k[met]] - 1.0 / zp[met]) <= np.abs(np.diff(inv)).max() / 2 + 1e-12).all()
+
+
+def test_slice_window_holds_the_slices_of_each_cells_interval_and_one_beside():
+    from inverse.grid import FrustumFrame, cell_centres
+    from inverse.view.depth import slice_window
+    from inverse.view.sweep import slice_depths
+
+    K = np.array([[100.0, 0, 31.5], [0, 100.0, 23.5], [0, 0, 1]])
+    frame = FrustumFrame(K=K, u_range=(-0.5, 63.5), v_range=(-0.5, 47.5), near=0.5,
+                         far=20.0)
+    res = (6, 8)
+    z = slice_depths(frame, 32)
+    lo = np.full((48, 64), 2.0)
+    hi = np.full((48, 64), 3.0)
+    uu, vv = cell_centres(frame, res)
+    lo[int(round(vv[0, 0])), int(round(uu[0, 0]))] = np.nan     # one cell unknown
+    win = slice_window(z, frame, res, lo, hi, slack=0.0)
+    inside = (z >= 2.0) & (z <= 3.0)
+    assert inside.any() and not inside.all()
+    assert (win[:, 1, 1] == inside).all()
+    assert not win[:, 0, 0].any()                               # unknown: none
+    wide = slice_window(z, frame, res, lo, hi, slack=1.0)
+    assert wide[:, 1, 1].sum() == inside.sum() + 2              # one more each side
+    assert (wide[:, 1, 1] >= win[:, 1, 1]).all()

@@ -15,7 +15,9 @@ depths the totems cannot tell apart.
 Public functions
 ----------------
 ``established_depth(var, n_land, parallax, z, ...) -> EstablishedDepth`` per cell;
-``plane_slice(plane, frame, res, z) -> (k, depth)`` the plane's slice per cell.
+``plane_slice(plane, frame, res, z) -> (k, depth)`` the plane's slice per cell;
+``slice_window(z, frame, res, lo, hi) -> (nk, nt, ns) bool`` the slices inside each
+cell's interval.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import numpy as np
 from inverse.grid import FrustumFrame, cell_centres
 from inverse.view.sweep import semi_global
 
-__all__ = ["EstablishedDepth", "established_depth", "plane_slice", "PRIOR", "TOL", "P1", "P2"]
+__all__ = ["EstablishedDepth", "established_depth", "plane_slice", "slice_window", "PRIOR",
+           "TOL", "P1", "P2"]
 
 P1, P2 = 0.3, 3.0
 """Semi-global matching's penalties, in median costs (the stereo view's,
@@ -67,6 +70,29 @@ def plane_slice(plane, frame: FrustumFrame, res, z) -> tuple[np.ndarray, np.ndar
     inv = 1.0 / np.where(inside, zp, 1.0)
     k = np.argmin(np.abs(1.0 / z[:, None, None] - inv[None]), axis=0)
     return np.where(inside, k, -1), np.where(inside, zp, np.nan)
+
+
+def slice_window(z, frame: FrustumFrame, res, lo, hi, *, slack: float = 1.0) -> np.ndarray:
+    """(nk, nt, ns) bool: the slices ``z`` (metres, (nk,), even in inverse depth) inside
+    each cell's interval ``lo`` <= z <= ``hi`` (metres, (H, W) maps over the photo such
+    as :class:`verify.metrics.evidence.Evidence`'s, read at the pixel of the cell's
+    centre), widened by ``slack`` slices in inverse depth; none where the interval is
+    unknown (NaN) or the centre lies outside the photo."""
+    z = np.asarray(z, np.float64)
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    H, W = lo.shape
+    uu, vv = cell_centres(frame, res)
+    u, v = np.rint(uu).astype(np.int64), np.rint(vv).astype(np.int64)
+    inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    u, v = np.clip(u, 0, W - 1), np.clip(v, 0, H - 1)
+    a, b = lo[v, u], hi[v, u]
+    known = inside & np.isfinite(a) & np.isfinite(b) & (a > 0)
+    inv = 1.0 / z
+    step = float(np.abs(np.diff(inv)).mean()) if len(z) > 1 else 0.0
+    near = 1.0 / np.where(known, a, 1.0) + slack * step      # the largest inverse depth
+    far = 1.0 / np.where(known, b, 1.0) - slack * step
+    within = (inv[:, None, None] <= near[None]) & (inv[:, None, None] >= far[None])
+    return within & known[None]
 
 
 def _vertex(cost, k, z):

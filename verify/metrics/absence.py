@@ -57,6 +57,7 @@ from scipy import ndimage
 
 from inverse.grid import FrustumFrame, cells_to_pixels
 from inverse.rays import TotemRays
+from inverse.view.depth import slice_window
 from inverse.view.sweep import slice_colours
 from scenes.camera import project
 from scenes.colour import linear_to_srgb
@@ -65,7 +66,7 @@ from verify.metrics.patches import chroma
 from verify.metrics.resolution import gaussian
 
 __all__ = ["SIGMA_PX", "STEP_PX", "MAX_SAMPLES", "BEHIND_SLICES", "MIN_TOTEMS",
-           "line_absence", "in_view", "absence"]
+           "INTERVAL_SLACK", "line_absence", "in_view", "absence"]
 
 SIGMA_PX = 3.0
 """Gaussian sigma (pixels) of the photo's chroma before it is read along the lines: the
@@ -85,6 +86,11 @@ mean, off by a few slices at edges)."""
 MIN_TOTEMS = 3
 """How many totems must miss what they saw at one point: two cross by chance where
 each sees, past an object's edge, something the camera does not; three seldom do."""
+
+
+INTERVAL_SLACK = 1.0
+"""Slices either side of the established depth's interval still judged (the interval
+holds the true depth on about half the reach)."""
 
 
 def line_absence(o, d, colour, image, valid, K, *, step_px: float = STEP_PX,
@@ -143,7 +149,8 @@ def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *
             sigma: float = corroborate.SIGMA_CELLS,
             cos_evidence: float = corroborate.COS_EVIDENCE,
             min_totems: int = MIN_TOTEMS, centers=None, spacing=None,
-            min_parallax: float = 0.0) -> np.ndarray:
+            min_parallax: float = 0.0, interval=None,
+            interval_slack: float = INTERVAL_SLACK) -> np.ndarray:
     """``A`` per photo pixel (see the module docstring).
 
     Parameters
@@ -161,6 +168,9 @@ def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *
         angular spacings (n,), radians, and the parallax (in those spacings,
         :mod:`verify.metrics.evidence`) two of the totems landing at a point must see it
         with for the point to be judged; 0 (default) judges every point.
+    interval : (lo, hi) each (H, W), the depth interval the totems establish (metres,
+        NaN where none: :class:`verify.metrics.evidence.Evidence`); the points judged
+        are those inside it, widened by ``interval_slack`` slices. None: every depth.
 
     Returns
     -------
@@ -195,6 +205,9 @@ def absence(rays: TotemRays, frame: FrustumFrame, image, totem_mask, K, depth, *
     if min_parallax > 0 and centers is not None:
         resolved = evidence.slice_parallax(sc, frame, centers, spacing) >= min_parallax
         per = np.where(resolved[None], per, -np.inf)
+    if interval is not None:
+        window = slice_window(sc.z, frame, res, *interval, slack=interval_slack)
+        per = np.where(window[None], per, -np.inf)
     kth = -np.sort(-per, axis=0)[min_totems - 1]               # (nk, nt, ns)
     cells = kth.max(axis=0)
     return cells_to_pixels(np.where(np.isfinite(cells), cells, np.nan), frame, (W, H))

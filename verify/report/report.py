@@ -167,7 +167,8 @@ def edit_metrics(manip_mask, heat: dict, grid, keep, judged) -> dict:
 def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
                   spacing, gain=None) -> dict:
     """Every metric's per-pixel map (:mod:`verify.metrics.patches`), CORROB and ABSENT from
-    the totem rays when the fit has them (CORROB from ``slices``,
+    the totem rays when the fit has them (ABSENT inside the depth interval of the evidence
+    map ``ev``; CORROB from ``slices``,
     :func:`verify.metrics.corroborate.ray_slices`), UNSEEN from CHROMA and CORROB, RANGE
     forgiven where the totems' rays, brought to the photo's exposure by the view's tone
     ``gain`` (3,), see the photo's colour along the pixel's ray (as CORROB, on the
@@ -187,7 +188,9 @@ def _pixel_errors(scene, fit, image, blurred, recon, totem_mask, ev, slices,
         errors["ABSENT"] = absence.absence(
             rays, frame, image, totem_mask, scene.K, getattr(fit, "recon_depth", None),
             centers=fit.centers, spacing=None if ev is None else ev.spacing,
-            min_parallax=0.0 if ev is None else evidence.MIN_PARALLAX)
+            min_parallax=0.0 if ev is None else evidence.MIN_PARALLAX,
+            interval=None if ev is None or ev.depth is None
+            else (ev.depth_lo, ev.depth_hi))
     errors["UNSEEN"] = corroborate.unseen(errors["CHROMA"],
                                           errors.get("CORROB", np.nan))
     return errors
