@@ -85,16 +85,15 @@ def truth_metrics(truth: Truth | None, *, fitted: np.ndarray, centers, seen: np.
                                 np.asarray(judged, bool))
     if manip is not None:
         out["manip_in_reach"] = _share(inside, np.asarray(manip, bool))
+    z_true = reach.depth.astype(np.float64)
+    area = inside & ~reach.backdrop & np.isfinite(z_true)     # the reach with a depth
+    if area.any():
+        out["totem_depth_bound"] = float(np.median(1.0 / reach.parallax[area]))
     if depth is not None and np.shape(depth) == image_shape:
-        z_true = reach.depth.astype(np.float64)
-        at = inside & ~reach.backdrop & np.isfinite(z_true) & np.isfinite(depth)
+        at = area & np.isfinite(depth)
         if at.any():
             err = np.abs(np.asarray(depth, np.float64)[at] - z_true[at]) / z_true[at]
             out["depth_error"] = float(np.median(err))
-    z_true = reach.depth.astype(np.float64)
-    area = inside & ~reach.backdrop & np.isfinite(z_true)
-    if area.any():
-        out["totem_depth_bound"] = float(np.median(1.0 / reach.parallax[area]))
     if totem_depth is not None and np.shape(totem_depth[0]) == image_shape:
         z, lo, hi = (np.asarray(a, np.float64) for a in totem_depth)
         at = area & np.isfinite(z)
